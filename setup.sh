@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Sets pde2cad up on a fresh Debian machine, then runs the main job on the bundled samples.
+#   ./setup.sh                 install everything, then vectorize examples/images -> out/
+#   ./setup.sh --install-only  install only (used by test.sh and CI)
+# Installs: Debian packages (potrace for the benchmark peer, libusb-1.0-0 for open3d),
+# a virtual environment at .venv with pde2cad and all its optional groups.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1)
+
+missing=()
+for pkg in "${APT_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  echo "setup: installing Debian packages: ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+PYTHON=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PYTHON" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip
+echo "setup: installing pde2cad and its dependencies into .venv (first time takes a few minutes)"
+.venv/bin/python -m pip install -q -e ".[all,dev]"
+.venv/bin/python -c "import pde2cad, numpy, scipy, ezdxf, OCP, build123d, cadquery, open3d; print('setup: pde2cad', pde2cad.__version__, 'ready')"
+
+if [ "${1:-}" = "--install-only" ]; then
+  exit 0
+fi
+
+echo "setup: main job: vectorizing the sample images in examples/images -> out/"
+mkdir -p out
+for img in examples/images/*.png; do
+  name=$(basename "$img" .png)
+  .venv/bin/pde2cad vectorize "$img" -o "out/$name.svg" -o "out/$name.dxf" --report "out/$name.json"
+done
+echo "setup: done; outputs are in $(pwd)/out"

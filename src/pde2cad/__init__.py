@@ -1,0 +1,28 @@
+"""pde2cad: measured data to manufacturable CAD.
+
+Binary images become outlines of cubic Béziers (SVG, DXF); point clouds become PDE surface
+patches (STEP, IGES). ``import pde2cad`` stays light: heavy libraries (OCP, open3d, ezdxf,
+matplotlib) are imported only by the functions that use them.
+"""
+
+from __future__ import annotations
+
+from pde2cad.errors import ExportError, FitError, InputError, Pde2CadError
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ExportError",
+    "FitError",
+    "InputError",
+    "Pde2CadError",
+    "__version__",
+    "vectorize",
+]
+
+
+def vectorize(image_or_path, tolerance: float = 1.0, **options):  # noqa: ANN001, ANN201
+    """Vectorize a binary image; see :func:`pde2cad.image.vectorize.vectorize`."""
+    from pde2cad.image.vectorize import vectorize as _vectorize
+
+    return _vectorize(image_or_path, tolerance=tolerance, **options)
