@@ -1,0 +1,424 @@
+"""Piecewise cubic Bézier fitting with break points found by bisection (Algorithm 1).
+
+One curve takes the longest run of points it can fit within the tolerance; the next curve
+starts where it stopped. The longest run is found by bisection (thesis Section 3.3) inside a
+bracket found by doubling from the previous curve's length, which gives the same break point
+as Algorithm 1 with far cheaper tests on long segments. Where a break point is not a corner,
+the next curve starts along the previous curve's end tangent (G1 join).
+
+Dimension-free: the same code fits 2D outlines and 3D boundary curves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pde2cad.curves import bezier
+from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, curve_to_polyline_distance, fit_cubic
+from pde2cad.curves.parameterize import METHODS
+from pde2cad.errors import InputError
+
+# Pieces keep at least this many points: fewer do not determine a cubic (the thesis's
+# Fig. 3.5(d) shows the 3-point failure of min-error splitting).
+MIN_POINTS = 4
+# The test runs on the points (pixel vertices); samples of the boundary between them can sit a
+# hair farther from the curve, so the test keeps a 2 % margin under the user's tolerance.
+SAFETY = 0.98
+
+
+@dataclass
+class ChainFit:
+    """Cubic pieces fitted to an ordered run of points.
+
+    Attributes
+    ----------
+    curves : (K, 4, D) float
+    fits : list of CubicFit
+        One per curve, with per-point errors and the parameterization used.
+    breaks : (K + 1,) int
+        Index of each piece's first point, then the last index.
+    corners : list of int
+        Indices of ``breaks`` where the join is sharp (C0 only).
+    """
+
+    curves: NDArray[np.float64]
+    fits: list[CubicFit]
+    breaks: NDArray[np.int64]
+    corners: list[int] = field(default_factory=list)
+
+    @property
+    def max_error(self) -> float:
+        return max((f.max_error for f in self.fits), default=0.0)
+
+    @property
+    def mean_error(self) -> float:
+        n = sum(len(f.errors) for f in self.fits)
+        return float(sum(f.errors.sum() for f in self.fits) / n) if n else 0.0
+
+    @property
+    def methods(self) -> list[str]:
+        return [f.method for f in self.fits]
+
+
+def end_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Unit tangent at the end of a cubic (None for a degenerate curve)."""
+    for k in (2, 1, 0):
+        v = ctrl[3] - ctrl[k]
+        n = float(np.linalg.norm(v))
+        if n > 1e-9:
+            return v / n
+    return None
+
+
+def start_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Unit tangent at the start of a cubic (None for a degenerate curve)."""
+    return end_tangent(ctrl[::-1]) * -1.0 if end_tangent(ctrl[::-1]) is not None else None
+
+
+class _Fitter:
+    """Shared state of one chain fit: points, tolerance and the piece test."""
+
+    def __init__(
+        self,
+        points: NDArray[np.float64],
+        tolerance: float,
+        param_points: NDArray[np.float64],
+        method: str,
+        rounds: int = NEWTON_ROUNDS,
+    ) -> None:
+        self.rounds = rounds
+        self.points = points
+        self.tol = tolerance * SAFETY
+        self.param_points = param_points
+        self.method = method
+
+    def fit(self, i: int, j: int, p0, p3, tan0, tan3, *, best: bool) -> tuple[CubicFit, bool]:
+        """Fit points[i..j]; ``best`` tries every parameterization and keeps the best that
+        passes, otherwise the first passing one is returned (enough for the search)."""
+        pts = self.points[i : j + 1]
+        ppts = self.param_points[i : j + 1]
+        names = list(METHODS) if self.method == "optimal" else [self.method]
+        chosen: CubicFit | None = None
+        chosen_ok = False
+        for name in names:
+            fit = fit_cubic(
+                pts, p0=p0, p3=p3, tan0=tan0, tan3=tan3, method=name, param_points=ppts, rounds=self.rounds
+            )
+            ok = fit.max_error <= self.tol and curve_to_polyline_distance(fit.ctrl, pts) <= self.tol
+            better = chosen is None or (ok, -fit.max_error) > (chosen_ok, -chosen.max_error)
+            if better:
+                chosen, chosen_ok = fit, ok
+            if ok and not best:
+                break
+            # Far outside the tolerance, another parameterization will not rescue the fit.
+            if not best and fit.max_error > 1.5 * self.tol:
+                break
+        assert chosen is not None
+        return chosen, chosen_ok
+
+
+def tangents(points: NDArray[np.float64], k: int = 2) -> NDArray[np.float64]:
+    """Unit tangents of an ordered run by central differences over +-k points (one-sided at
+    the ends). Returns (n, D)."""
+    n = len(points)
+    idx = np.arange(n)
+    fwd = points[np.minimum(idx + k, n - 1)] - points[np.maximum(idx - k, 0)]
+    norm = np.linalg.norm(fwd, axis=1, keepdims=True)
+    return np.divide(fwd, norm, out=np.zeros_like(fwd), where=norm > 1e-12)
+
+
+def fit_chain(
+    points: NDArray[np.float64],
+    tolerance: float,
+    *,
+    p_start: NDArray[np.float64] | None = None,
+    p_end: NDArray[np.float64] | None = None,
+    tan_start: NDArray[np.float64] | None = None,
+    tan_end: NDArray[np.float64] | None = None,
+    g1: bool = True,
+    param_points: NDArray[np.float64] | None = None,
+    join_tangents: NDArray[np.float64] | None = None,
+    method: str = "optimal",
+    rounds: int = NEWTON_ROUNDS,
+) -> ChainFit:
+    """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
+
+    Parameters
+    ----------
+    points : (n, D) float, n >= 2
+    tolerance : float
+        Maximum distance from every point to the curves (and from the curves back to the
+        points' polyline), in the points' units.
+    p_start, p_end : (D,) float, optional
+        Exact end points of the chain (default the first and last point).
+    tan_start, tan_end : (D,) float, optional
+        Tangent directions the chain must start / end with.
+    g1 : bool
+        Join consecutive pieces G1 (default): a break point is placed on ``param_points``
+        (a denoised copy of the points) and both pieces take the tangent there. Without it
+        joins are C0 at the raw points, as in the thesis.
+    param_points : (n, D) float, optional
+        Denoised points, used for the parameterizations and as join positions (default
+        ``points``).
+    join_tangents : (n, D) float, optional
+        Unit tangents at the points for G1 joins (default: central differences of
+        ``param_points``).
+    method : str
+        "optimal" (per piece, the parameterization with the least error) or one name of
+        :data:`pde2cad.curves.parameterize.METHODS`.
+    rounds : int
+        Newton reparameterization rounds per fit; a few suffice for noisy pixel data, smooth
+        samples (3D boundaries) gain accuracy from more.
+
+    Returns
+    -------
+    ChainFit
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or len(pts) < 2:
+        raise InputError(f"a curve fit needs an (n, D) array with n >= 2 points, got shape {pts.shape}")
+    if not np.isfinite(pts).all():
+        raise InputError("points contain NaN or inf; remove those rows before fitting")
+    if not tolerance > 0:
+        raise InputError(f"tolerance must be > 0, got {tolerance}")
+    ppts = pts if param_points is None else np.asarray(param_points, dtype=float)
+    if g1:
+        joins = ppts
+        jtan = tangents(ppts) if join_tangents is None else np.asarray(join_tangents, dtype=float)
+    else:
+        joins, jtan = pts, None
+    fitter = _Fitter(pts, tolerance, ppts, method, rounds)
+    end = len(pts) - 1
+    start = 0
+    first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
+    last_p = pts[end] if p_end is None else np.asarray(p_end, dtype=float)
+    tan = None if tan_start is None else np.asarray(tan_start, dtype=float)
+    final_tan = None if tan_end is None else np.asarray(tan_end, dtype=float)
+    pieces: list[CubicFit] = []
+    breaks = [0]
+    corners: list[int] = []
+    guess = 32
+    p0 = first_p
+    while start < end:
+        fit, ok = fitter.fit(start, end, p0, last_p, tan, final_tan, best=False)
+        if ok:
+            stop = end
+        else:
+            stop, fit = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+        if stop < end and end - stop < MIN_POINTS - 1:
+            # Leave the last piece enough points to be determined, if a slightly shorter
+            # piece still passes (fit-ability is only nearly monotone in the length).
+            for cand in range(end - (MIN_POINTS - 1), max(start + MIN_POINTS - 2, end - 2 * MIN_POINTS), -1):
+                t3c = None if jtan is None else jtan[cand]
+                if fitter.fit(start, cand, p0, joins[cand], tan, t3c, best=False)[1]:
+                    stop = cand
+                    break
+        p3 = last_p if stop == end else joins[stop]
+        t3 = final_tan if stop == end else (None if jtan is None else jtan[stop])
+        fit, ok = fitter.fit(start, stop, p0, p3, tan, t3, best=True)
+        pieces.append(fit)
+        breaks.append(stop)
+        guess = max(stop - start, MIN_POINTS)
+        if stop < end and jtan is None:
+            corners.append(len(pieces))
+        tan = t3 if stop < end else None
+        p0 = p3
+        start = stop
+    curves = np.stack([f.ctrl for f in pieces]) if pieces else np.zeros((0, 4, pts.shape[1]))
+    return ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners)
+
+
+def _longest_prefix(
+    fitter: _Fitter, start: int, end: int, p0: NDArray[np.float64], tan, joins, jtan, guess: int
+) -> tuple[int, CubicFit]:
+    """Largest stop in (start, end) such that points[start..stop] pass the test: doubling
+    from ``guess`` to bracket it, then bisection (Algorithm 1). ``end`` is known to fail."""
+
+    def test(m: int) -> tuple[CubicFit, bool]:
+        return fitter.fit(start, m, p0, joins[m], tan, None if jtan is None else jtan[m], best=False)
+
+    lo = min(start + MIN_POINTS - 1, end - 1)
+    lo_fit: CubicFit | None = None
+    hi = end
+    m = min(start + max(guess, MIN_POINTS - 1), end - 1)
+    while lo < m < hi:
+        fit, ok = test(m)
+        if not ok:
+            hi = m
+            break
+        lo, lo_fit = m, fit
+        m = min(start + 2 * (m - start), end - 1)
+        if m == lo:
+            break
+    while hi - lo > 1:
+        m = (lo + hi) // 2
+        fit, ok = test(m)
+        if ok:
+            lo, lo_fit = m, fit
+        else:
+            hi = m
+    if lo_fit is None:
+        lo_fit, _ = test(lo)
+    return lo, lo_fit
+
+
+def denoise(
+    points: NDArray[np.float64], closed: bool, pos_window: int = 7, tan_window: int = 17
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Denoised positions and unit tangents of an ordered run (Savitzky-Golay, quadratic).
+
+    Pixel staircases have chord lengths of exactly 1 and tangents that flip by 90 degrees at
+    every step; the parameterizations and G1 joins need the underlying smooth curve. Runs
+    are smoothed on their own (``closed=False``: polynomial extrapolation at the ends, so a
+    corner never blurs into its neighbours) or cyclically (``closed=True``).
+
+    Returns
+    -------
+    positions : (n, D) float
+    tangents : (n, D) float, unit
+    """
+    n = len(points)
+
+    def window(w: int) -> int:
+        w = min(w, n if n % 2 else n - 1)
+        return w if w >= 5 else 0
+
+    wp, wt = window(pos_window), window(tan_window)
+    pts = np.asarray(points, dtype=float)
+    pos = _savgol(pts, wp, 0, closed) if wp else pts.copy()
+    der = _savgol(pts, wt, 1, closed) if wt else (np.gradient(pts, axis=0) if n > 1 else np.zeros_like(pts))
+    norm = np.linalg.norm(der, axis=1, keepdims=True)
+    tan = np.divide(der, norm, out=np.zeros_like(der), where=norm > 1e-12)
+    return pos, tan
+
+
+def _savgol(points: NDArray[np.float64], window: int, deriv: int, closed: bool) -> NDArray[np.float64]:
+    """Savitzky-Golay (quadratic) value or first derivative, as scipy.signal.savgol_filter
+    with mode "wrap" / "interp", without importing scipy.signal (seconds to import)."""
+    half = window // 2
+    x = np.arange(-half, half + 1, dtype=float)
+    vander = np.stack([np.ones_like(x), x, x * x], axis=1)  # (w, 3)
+    pinv = np.linalg.pinv(vander)  # (3, w): polynomial coefficients from window values
+    n = len(points)
+    if closed:
+        idx = (np.arange(n)[:, None] + np.arange(-half, half + 1)[None, :]) % n
+        return np.einsum("w,nwd->nd", pinv[deriv], points[idx])
+    out = np.empty_like(points)
+    idx = np.arange(half, n - half)[:, None] + np.arange(-half, half + 1)[None, :]
+    out[half : n - half] = np.einsum("w,nwd->nd", pinv[deriv], points[idx])
+    # Ends: evaluate the polynomial fitted to the first / last full window.
+    for block, rows in ((points[:window], np.arange(half)), (points[n - window :], np.arange(n - half, n))):
+        coef = pinv @ block  # (3, D)
+        xs = (rows - (rows[0] if rows[0] == 0 else n - window)).astype(float) - half
+        if deriv == 0:
+            out[rows] = coef[0] + xs[:, None] * coef[1] + (xs * xs)[:, None] * coef[2]
+        else:
+            out[rows] = coef[1] + 2.0 * xs[:, None] * coef[2]
+    return out
+
+
+def fit_closed(
+    points: NDArray[np.float64],
+    tolerance: float,
+    *,
+    corners: NDArray[np.int64] | None = None,
+    g1: bool = True,
+    smooth: bool = True,
+    method: str = "optimal",
+    start: int | None = None,
+) -> tuple[ChainFit, int]:
+    """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
+
+    With corners, each run between consecutive corners is fitted on its own (sharp joins at
+    the corners, G1 inside). Without corners the loop is opened at ``start`` (default: its
+    sharpest turn) and closed with a G1 join there.
+
+    Parameters
+    ----------
+    points : (n, D) float
+    tolerance : float
+    corners : (c,) int, optional
+        Indices of corner points.
+    g1 : bool
+        G1 joins at break points that are not corners.
+    smooth : bool
+        Parameterize and place joins on a denoised copy of the points (:func:`denoise`);
+        off for points that are already smooth samples.
+    method : str
+        See :func:`fit_chain`.
+
+    Returns
+    -------
+    (ChainFit, offset)
+        The curves run around the loop starting at point index ``offset``; the chain's
+        ``breaks`` index the rolled loop ``np.roll(points, -offset)`` closed by its first point.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    cidx = np.unique(np.asarray(corners, dtype=np.int64) % n) if corners is not None and len(corners) else None
+    if cidx is None:
+        pos, tan = denoise(pts, closed=True) if smooth else (pts, _closed_tangents(pts))
+        offset = int(_max_curvature_index(pos)) if start is None else int(start) % n
+        ring = np.r_[offset:n, 0 : offset + 1]
+        chain = None
+        if g1:
+            # Open the loop on its denoised curve with the loop's own tangent there, so the
+            # closing join is G1 like every other.
+            chain = fit_chain(
+                pts[ring], tolerance, p_start=pos[offset], p_end=pos[offset],
+                tan_start=tan[offset], tan_end=tan[offset], g1=True,
+                param_points=pos[ring], join_tangents=tan[ring], method=method,
+            )
+        if chain is None or len(chain.fits) == 1:
+            # One cubic cannot close G1 with itself: there the join is a corner.
+            chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
+                              join_tangents=tan[ring], method=method)
+            chain.corners = sorted(set(chain.corners) | {0})
+        return chain, offset
+    offset = int(cidx[0])
+    ring = np.r_[offset:n, 0 : offset + 1]
+    closed = pts[ring]
+    cuts = np.concatenate([cidx - offset, [n]])
+    curves, fits, breaks, corner_list = [], [], [0], []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        run = closed[a : b + 1]
+        pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
+        chain = fit_chain(run, tolerance, g1=g1, param_points=pos, join_tangents=tan, method=method)
+        corner_list.append(len(fits))
+        corner_list.extend(len(fits) + c for c in chain.corners if c != 0)
+        curves.append(chain.curves)
+        fits.extend(chain.fits)
+        breaks.extend(int(a) + chain.breaks[1:])
+    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list))), offset
+
+
+def _closed_tangents(points: NDArray[np.float64], k: int = 2) -> NDArray[np.float64]:
+    """Unit tangents of a closed polygon by central differences over +-k vertices."""
+    fwd = np.roll(points, -k, axis=0) - np.roll(points, k, axis=0)
+    norm = np.linalg.norm(fwd, axis=1, keepdims=True)
+    return np.divide(fwd, norm, out=np.zeros_like(fwd), where=norm > 1e-12)
+
+
+def _max_curvature_index(points: NDArray[np.float64]) -> int:
+    """Index of the sharpest turn of a closed polygon, measured over +-3 vertices."""
+    n = len(points)
+    k = min(3, max(1, n // 4))
+    a = np.roll(points, k, axis=0) - points
+    b = np.roll(points, -k, axis=0) - points
+    na = np.linalg.norm(a, axis=1)
+    nb = np.linalg.norm(b, axis=1)
+    cos = np.sum(a * b, axis=1) / np.maximum(na * nb, 1e-12)
+    return int(np.argmax(cos))  # the smallest interior angle
+
+
+def chain_curves(chain: ChainFit) -> NDArray[np.float64]:
+    """The chain's control points ``(K, 4, D)`` (convenience for callers)."""
+    return chain.curves
+
+
+def sample(chain: ChainFit, per_curve: int = 16) -> NDArray[np.float64]:
+    """Points along the chain, ``per_curve`` per piece (end point excluded)."""
+    return bezier.sample_chain(chain.curves, per_curve)
