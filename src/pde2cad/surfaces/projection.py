@@ -1,0 +1,288 @@
+"""Point parameterization by closest-point projection onto a base patch (Section 5.2.3).
+
+The thesis parameterizes each point by its closest point on the bilinear Coons patch, with the
+geometric method of Li et al. (2019) run in parallel. Here the same closest point is found
+for all points at once: a coarse grid of surface samples and a KD-tree give each point a start
+in the right basin, then a damped Newton iteration on ``f(u, v) = |S(u, v) - P|^2 / 2`` with
+analytic first and second derivatives converges quadratically, inside the box [0, 1]^2.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from pde2cad.errors import InputError
+
+_EPS = np.finfo(float).eps
+
+
+def _jet_function(surface: Any) -> Any:
+    """``(u, v) -> (S, S_u, S_v, S_uu, S_uv, S_vv)``, each coordinate-major (D, n).
+
+    The Coons patches return transposed views of (D, n) arrays, so the transpose here is
+    free and every later operation runs along contiguous rows of n points.
+    """
+    if hasattr(surface, "jet"):
+        raw = surface.jet
+    else:
+        missing = [
+            n for n in ("evaluate", "derivatives", "second_derivatives") if not hasattr(surface, n)
+        ]
+        if missing:
+            raise InputError(
+                f"surface lacks {', '.join(missing)}; pass a patch with evaluate(u, v), "
+                "derivatives(u, v) and second_derivatives(u, v), such as BilinearCoons"
+            )
+
+        def raw(u: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+            return (
+                surface.evaluate(u, v),
+                *surface.derivatives(u, v),
+                *surface.second_derivatives(u, v),
+            )
+
+    def jet(u: NDArray[np.float64], v: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        return tuple(np.asarray(a, dtype=float).T for a in raw(u, v))
+
+    return jet
+
+
+def _dot(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Column-wise dot products of two (D, n) arrays: (n,)."""
+    out = a[0] * b[0]
+    for k in range(1, a.shape[0]):
+        out += a[k] * b[k]
+    return out
+
+
+def _newton_terms(
+    jet: tuple[NDArray[np.float64], ...], p: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Objective ``f = |r|^2``, gradient/2 ``(r.S_u, r.S_v)`` (2, n) and a positive
+    semi-definite Hessian/2 ``(h_uu, h_uv, h_vv)`` (3, n); ``p`` and the jet are (D, n).
+
+    Full Newton (Gauss-Newton plus the curvature terms ``r.S_xy``) where that is positive
+    definite, which gives quadratic convergence even for points off the surface; Gauss-Newton
+    elsewhere, so every step is a descent direction.
+    """
+    s, su, sv, suu, suv, svv = jet
+    r = s - p
+    f = _dot(r, r)
+    grad = np.stack([_dot(r, su), _dot(r, sv)])
+    gn = np.stack([_dot(su, su), _dot(su, sv), _dot(sv, sv)])
+    full = gn + np.stack([_dot(r, suu), _dot(r, suv), _dot(r, svv)])
+    definite = (full[0] > 0) & (full[0] * full[2] - full[1] ** 2 > 0)
+    hess = np.where(definite, full, gn)
+    return f, grad, hess
+
+
+def _solve_step(
+    uv: NDArray[np.float64],
+    grad: NDArray[np.float64],
+    hess: NDArray[np.float64],
+    mu: NDArray[np.float64],
+    bounded: bool,
+) -> NDArray[np.float64]:
+    """Levenberg-Marquardt step ``-(H + mu tr(H)/2 I)^-1 g`` for 2x2 systems, vectorized;
+    all arrays coordinate-major ((2, n), (2, n), (3, n), (n,)).
+
+    With ``bounded``, a coordinate sitting on a side of [0, 1]^2 whose gradient pushes it out
+    is frozen and the step taken in the other one (a projected Newton step).
+    """
+    gu, gv = grad[0].copy(), grad[1].copy()
+    a, b, c = hess[0].copy(), hess[1].copy(), hess[2].copy()
+    # The tiny floor keeps the system solvable where a side degenerates to a point (S_u = 0).
+    damp = (mu + 1e-12) * (0.5 * (a + c)) + 1e-300
+    a += damp
+    c += damp
+    if bounded:
+        u, v = uv
+        fix_u = ((u <= 0.0) & (gu > 0)) | ((u >= 1.0) & (gu < 0))
+        fix_v = ((v <= 0.0) & (gv > 0)) | ((v >= 1.0) & (gv < 0))
+        gu[fix_u], gv[fix_v] = 0.0, 0.0
+        b[fix_u | fix_v] = 0.0
+    det = a * c - b * b
+    det = np.where(det > 0, det, np.inf)  # no descent information: stay put
+    return np.stack([-(c * gu - b * gv) / det, -(a * gv - b * gu) / det])
+
+
+def _project_chunk(
+    jet_fn: Any,
+    p: NDArray[np.float64],
+    uv: NDArray[np.float64],
+    jet0: tuple[NDArray[np.float64], ...],
+    iters: int,
+    xtol: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Damped projected Newton for one chunk of points ``p`` (D, n) from ``uv`` (2, n), where
+    the surface jet is ``jet0``; returns uv, f, grad, hess at the final points.
+
+    The state is kept compact for the points still iterating; a finished point is written
+    out once, so late iterations cost only what the few slow points need.
+    """
+    n = p.shape[1]
+    out_uv, out_f = uv.copy(), np.empty(n)
+    out_grad, out_hess = np.empty((2, n)), np.empty((3, n))
+    f, grad, hess = _newton_terms(jet0, p)
+    idx = np.arange(n)
+    mu = np.zeros(n)
+    scale = np.sqrt(_dot(p, p))
+
+    def retire(keep: NDArray[np.bool_]) -> None:
+        nonlocal idx, uv, f, grad, hess, mu, p, scale
+        done, gone = idx[~keep], ~keep
+        out_uv[:, done], out_f[done] = uv[:, gone], f[gone]
+        out_grad[:, done], out_hess[:, done] = grad[:, gone], hess[:, gone]
+        idx, uv, f, grad, hess = idx[keep], uv[:, keep], f[keep], grad[:, keep], hess[:, keep]
+        mu, p, scale = mu[keep], p[:, keep], scale[keep]
+
+    for _ in range(iters):
+        trial = np.clip(uv + _solve_step(uv, grad, hess, mu, True), 0.0, 1.0)
+        moved = np.abs(trial - uv).max(axis=0) > xtol
+        if not moved.all():
+            retire(moved)
+            trial = trial[:, moved]
+        if idx.size == 0:
+            break
+        f_new, g_new, h_new = _newton_terms(jet_fn(trial[0], trial[1]), p)
+        # Accept any decrease, allowing for the rounding of |S - P|^2 itself.
+        slack = 4.0 * _EPS * scale * (np.sqrt(f) + _EPS * scale)
+        ok = f_new <= f + slack
+        if ok.all():
+            uv, f, grad, hess = trial, f_new, g_new, h_new
+            mu *= 0.1
+        else:
+            uv = np.where(ok, trial, uv)
+            f = np.where(ok, f_new, f)
+            grad = np.where(ok, g_new, grad)
+            hess = np.where(ok, h_new, hess)
+            mu = np.where(ok, 0.1 * mu, np.maximum(10.0 * mu, 1e-3))
+            # A step that keeps failing at huge damping means a minimum up to rounding.
+            if np.any(mu >= 1e12):
+                retire(mu < 1e12)
+    retire(np.zeros(idx.size, dtype=bool))
+    return out_uv, out_f, out_grad, out_hess
+
+
+def project_points(
+    surface: Any,
+    points: ArrayLike,
+    grid: int = 32,
+    iters: int = 20,
+    *,
+    margin: float = 1e-3,
+    chunk: int = 50_000,
+    xtol: float = 1e-13,
+    workers: int = -1,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Closest points on a parametric patch: the ``(u, v)`` of each point (Section 5.2.3).
+
+    Parameters
+    ----------
+    surface : patch
+        Anything with ``evaluate(u, v)``, ``derivatives(u, v)`` and
+        ``second_derivatives(u, v)`` (or ``jet(u, v)`` returning all six at once), such as
+        :class:`~pde2cad.surfaces.coons.BilinearCoons`, ``BicubicCoons`` or
+        :class:`~pde2cad.surfaces.deformation.DeformedPatch`.
+    points : (N, D) float
+    grid : int
+        The start is the nearest of ``(grid + 1)^2`` surface samples on a uniform (u, v)
+        grid; raise it for strongly curved patches where a coarse sample could pick the wrong
+        basin.
+    iters : int
+        Maximum Newton iterations (typically 3-6 are used).
+    margin : float
+        Parametric distance beyond [0, 1]^2 at which a point is flagged ``outside``.
+    chunk : int
+        Points processed together (bounds memory: about 2 kB per point in flight).
+    workers : int
+        Threads working on chunks; -1 uses every core.
+    xtol : float
+        Stop when a step moves (u, v) by less than this.
+
+    Returns
+    -------
+    params : (N, 2) float
+        ``(u, v)`` in [0, 1]^2 of the closest point within the patch.
+    distances : (N,) float
+        ``|P - S(u, v)|``.
+    outside : (N,) bool
+        True where the unclamped closest point lies beyond [0, 1]^2 by more than ``margin``
+        (estimated by one unconstrained Newton step from the clamped optimum): the point is
+        past a side, so its parameter is the side's and its residual is not the surface's.
+
+    Raises
+    ------
+    InputError
+        Wrong shape, NaN/inf, or a surface without the needed methods.
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2:
+        raise InputError(f"points must have shape (N, D), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        bad = int(np.argmax(~np.all(np.isfinite(pts), axis=1)))
+        raise InputError(f"points contain NaN or inf (first at row {bad}); drop those rows first")
+    if grid < 1 or iters < 0 or chunk < 1:
+        raise InputError(f"grid, chunk must be >= 1 and iters >= 0; got {grid}, {chunk}, {iters}")
+    jet_fn = _jet_function(surface)
+    g = np.linspace(0.0, 1.0, grid + 1)
+    gu, gv = (a.reshape(-1) for a in np.meshgrid(g, g, indexing="ij"))
+    # The whole jet on the grid: every start is a grid sample, so the first Newton step
+    # needs no surface evaluation of its own.
+    grid_jet = tuple(np.ascontiguousarray(a) for a in jet_fn(gu, gv))
+    samples = grid_jet[0].T
+    if samples.shape[-1] != pts.shape[1]:
+        raise InputError(
+            f"points have dimension {pts.shape[1]} but the surface has {samples.shape[-1]}"
+        )
+    n = pts.shape[0]
+    params = np.empty((n, 2))
+    distances = np.empty(n)
+    outside = np.zeros(n, dtype=bool)
+    if n == 0:
+        return params, distances, outside
+    # Leave out samples where the patch degenerates (the collapsed side of a 3-sided patch,
+    # S_u = 0): there the gradient along the side vanishes too, so a Newton start on the
+    # apex would stay there. Points near it start one row in and still reach it.
+    _, su, sv = grid_jet[:3]
+    area2 = _dot(su, su) * _dot(sv, sv) - _dot(su, sv) ** 2
+    usable = np.flatnonzero(area2 > 1e-16 * area2.max())
+    if usable.size == 0:
+        usable = np.arange(area2.size)
+    gu, gv = gu[usable], gv[usable]
+    grid_jet = tuple(np.ascontiguousarray(a[:, usable]) for a in grid_jet)
+    tree = cKDTree(samples[usable])
+
+    def run(start: int) -> None:
+        part = slice(start, min(start + chunk, n))
+        # An approximate nearest sample (within 2x the true distance) is start enough for
+        # Newton and halves the KD-tree time.
+        _, idx = tree.query(pts[part], eps=1.0)
+        uv0 = np.stack([gu[idx], gv[idx]])
+        jet0 = tuple(a[:, idx] for a in grid_jet)
+        p = np.ascontiguousarray(pts[part].T)
+        uv, f, grad, hess = _project_chunk(jet_fn, p, uv0, jet0, iters, xtol)
+        free = uv + _solve_step(uv, grad, hess, np.zeros(uv.shape[1]), False)
+        # Only a coordinate held on a side can have its optimum beyond it.
+        past = ((uv <= 0.0) & (free < -margin)) | ((uv >= 1.0) & (free > 1.0 + margin))
+        params[part] = uv.T
+        distances[part] = np.sqrt(f)
+        outside[part] = np.any(past, axis=0)
+
+    starts = range(0, n, chunk)
+    threads = min(len(starts), os.cpu_count() or 1) if workers == -1 else max(1, workers)
+    if threads == 1:
+        for start in starts:
+            run(start)
+    else:
+        # numpy releases the GIL in its array loops, so chunks run in parallel on threads
+        # (chunks write disjoint slices of the outputs).
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(run, starts))
+    return params, distances, outside

@@ -1,0 +1,219 @@
+"""Tests of the sine (Eq. 5.17) and sine-squared (Eq. 5.21) deformation surfaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from pde2cad.errors import FitError, InputError
+from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons
+from pde2cad.surfaces.deformation import (
+    Deformation,
+    DeformedPatch,
+    choose_mn,
+    fit_deformation,
+    sine_basis,
+)
+
+RNG = np.random.default_rng(5172)
+EDGE = np.linspace(0.0, 1.0, 101)
+
+
+def _deformation(kind: str, m: int = 5, n: int = 4) -> Deformation:
+    return Deformation(RNG.normal(size=(m, n, 3)), kind)  # type: ignore[arg-type]
+
+
+def _sides() -> list[NDArray[np.float64]]:
+    p00, p10, p11, p01 = (
+        np.array(p, dtype=float) for p in ([0, 0, 0], [2, 0, 0.4], [2, 2, 0], [0, 2, 0.8])
+    )
+    return [
+        np.array([p00, [0.6, -0.3, 0.5], [1.4, 0.2, -0.2], p10]),
+        np.array([p10, [2.3, 0.7, 0.1], [1.8, 1.4, 0.6], p11]),
+        np.array([p01, [0.7, 2.4, 1.0], [1.3, 1.8, 0.1], p11]),
+        np.array([p00, [-0.2, 0.6, 0.4], [0.3, 1.5, 1.1], p01]),
+    ]
+
+
+def _on_sides(fn: object) -> NDArray[np.float64]:
+    """Stack of ``fn(u, v)`` along the four sides."""
+    f = fn  # type: ignore[assignment]
+    return np.concatenate([f(EDGE, 0.0), f(EDGE, 1.0), f(0.0, EDGE), f(1.0, EDGE)])  # type: ignore[operator]
+
+
+def test_c0_vanishes_on_the_sides() -> None:
+    w = _deformation("c0")
+    np.testing.assert_allclose(_on_sides(w.evaluate), 0.0, atol=1e-13)
+    # ...but its slope across the sides does not: only positional continuity (C0).
+    su, _ = w.derivatives(0.0, EDGE)
+    assert np.abs(su).max() > 1.0
+
+
+def test_c1_and_its_first_derivatives_vanish_on_the_sides() -> None:
+    w = _deformation("c1")
+    np.testing.assert_allclose(_on_sides(w.evaluate), 0.0, atol=1e-13)
+    np.testing.assert_allclose(_on_sides(lambda u, v: w.derivatives(u, v)[0]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(_on_sides(lambda u, v: w.derivatives(u, v)[1]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(
+        _on_sides(lambda u, v: w.second_derivatives(u, v)[1]), 0.0, atol=1e-11
+    )
+
+
+def test_c0_on_bilinear_keeps_the_sides() -> None:
+    base = BilinearCoons(*_sides())
+    patch = DeformedPatch(base, _deformation("c0"))
+    np.testing.assert_allclose(
+        _on_sides(patch.evaluate), _on_sides(base.evaluate), rtol=0, atol=1e-12
+    )
+
+
+def test_c1_on_bicubic_keeps_sides_and_ribbons() -> None:
+    bottom, right, top, left = _sides()
+    ends = np.array([0.0, 1.0])
+    dl, dr = (PiecewiseBezier.from_cubic(c).derivative(ends) for c in (left, right))
+    db, dt = (PiecewiseBezier.from_cubic(c).derivative(ends) for c in (bottom, top))
+    # Cubic ribbons whose ends agree with the sides (twist left to the default average).
+    d_bottom = np.array([dl[0], dl[0] + [0.1, 0.3, 0], dr[0] - [0.2, 0.1, 0.3], dr[0]])
+    d_top = np.array([dl[1], dl[1] + [0.2, 0.0, 0.1], dr[1] + [0.0, 0.2, 0.0], dr[1]])
+    d_left = np.array([db[0], db[0] + [0.0, 0.1, 0.2], dt[0] - [0.1, 0.0, 0.0], dt[0]])
+    d_right = np.array([db[1], db[1] + [0.3, 0.0, 0.0], dt[1] + [0.0, 0.0, 0.2], dt[1]])
+    base = BicubicCoons(bottom, right, top, left, d_bottom, d_right, d_top, d_left)
+    patch = DeformedPatch(base, _deformation("c1"))
+    np.testing.assert_allclose(
+        _on_sides(patch.evaluate), _on_sides(base.evaluate), rtol=0, atol=1e-12
+    )
+    for k in (0, 1):
+        np.testing.assert_allclose(
+            _on_sides(lambda u, v, k=k: patch.derivatives(u, v)[k]),
+            _on_sides(lambda u, v, k=k: base.derivatives(u, v)[k]),
+            rtol=0,
+            atol=1e-11,
+        )
+
+
+def test_loads_follow_eq_5_17() -> None:
+    w = _deformation("c0", 3, 4)
+    u, v = RNG.random(50), RNG.random(50)
+    m = np.arange(1, 4)[:, None]
+    n = np.arange(1, 5)[None, :]
+    denom = np.pi**4 * (m * m + n * n) ** 2  # D = 1
+    expected = np.einsum(
+        "im,in,mnd->id",
+        np.sin(np.pi * u[:, None] * m.T),
+        np.sin(np.pi * v[:, None] * n),
+        w.loads / denom[..., None],
+    )
+    np.testing.assert_allclose(w.evaluate(u, v), expected, atol=1e-13)
+
+
+@pytest.mark.parametrize("kind", ["c0", "c1"])
+def test_derivatives_are_analytic(kind: str) -> None:
+    w = _deformation(kind)
+    u, v = RNG.random(40), RNG.random(40)
+    h = 1e-6
+    su, sv = w.derivatives(u, v)
+    np.testing.assert_allclose(
+        su, (w.evaluate(u + h, v) - w.evaluate(u - h, v)) / (2 * h), atol=1e-6
+    )
+    np.testing.assert_allclose(
+        sv, (w.evaluate(u, v + h) - w.evaluate(u, v - h)) / (2 * h), atol=1e-6
+    )
+    suu, suv, svv = w.second_derivatives(u, v)
+    np.testing.assert_allclose(
+        suu, (w.derivatives(u + h, v)[0] - w.derivatives(u - h, v)[0]) / (2 * h), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        suv, (w.derivatives(u, v + h)[0] - w.derivatives(u, v - h)[0]) / (2 * h), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        svv, (w.derivatives(u, v + h)[1] - w.derivatives(u, v - h)[1]) / (2 * h), atol=1e-5
+    )
+    reference = (w.evaluate(u, v), su, sv, suu, suv, svv)
+    for fast, slow in zip(w.jet(u, v), reference, strict=True):
+        np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-10)
+
+
+def test_sine_basis_terms() -> None:
+    t = RNG.random(30)
+    k = np.arange(1, 5)
+    np.testing.assert_allclose(sine_basis(t, 4, "c0"), np.sin(np.pi * np.outer(t, k)), atol=1e-15)
+    np.testing.assert_allclose(
+        sine_basis(t, 4, "c1"), np.sin(np.pi * np.outer(t, k)) ** 2, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        sine_basis(t, 4, "c1", 1),
+        2 * np.pi * k * np.sin(np.pi * np.outer(t, k)) * np.cos(np.pi * np.outer(t, k)),
+        atol=1e-13,
+    )
+
+
+@pytest.mark.parametrize("kind", ["c0", "c1"])
+def test_fit_recovers_known_coefficients(kind: str) -> None:
+    truth = _deformation(kind, 6, 5)
+    params = RNG.random((400, 2))
+    residuals = truth.evaluate(params[:, 0], params[:, 1])
+    fit = fit_deformation(residuals, params, 6, 5, kind)  # type: ignore[arg-type]
+    assert fit.ridge == 0.0
+    np.testing.assert_allclose(fit.coefficients, truth.coefficients, rtol=0, atol=1e-10)
+    assert fit.max_error < 1e-12 and fit.mean_error <= fit.max_error
+
+
+def test_fit_regularizes_near_square_systems() -> None:
+    truth = _deformation("c0", 5, 5)
+    params = RNG.random((30, 2))  # 30 points for 25 unknowns: oscillation-prone
+    residuals = truth.evaluate(params[:, 0], params[:, 1])
+    fit = fit_deformation(residuals, params, 5, 5)
+    assert fit.ridge > 0.0
+    assert fit.max_error < 1e-2  # still (nearly) interpolates the data
+
+
+def test_fit_refuses_more_unknowns_than_points() -> None:
+    params = RNG.random((20, 2))
+    residuals = RNG.normal(size=(20, 3))
+    with pytest.raises(FitError, match=r"20 points cannot determine M\*N = 25.*ridge"):
+        fit_deformation(residuals, params, 5, 5)
+    fit = fit_deformation(residuals, params, 5, 5, ridge=1e-6)  # allowed when asked for
+    assert fit.max_error < 1e-2
+
+
+@pytest.mark.parametrize(
+    ("residuals", "params", "match"),
+    [
+        (np.full((10, 3), np.nan), RNG.random((10, 2)), "NaN"),
+        (np.zeros((10, 3)), RNG.random((9, 2)), "same N"),
+        (np.zeros((10, 3)), RNG.random((10, 2)) + 1.0, r"\[0, 1\]\^2"),
+    ],
+)
+def test_fit_rejects_bad_input(
+    residuals: NDArray[np.float64], params: NDArray[np.float64], match: str
+) -> None:
+    with pytest.raises(InputError, match=match):
+        fit_deformation(residuals, params, 2, 2)
+
+
+def test_fit_rejects_bad_kind_and_sizes() -> None:
+    params, residuals = RNG.random((10, 2)), np.zeros((10, 3))
+    with pytest.raises(InputError, match="kind"):
+        fit_deformation(residuals, params, 2, 2, kind="c2")  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="positive integers"):
+        fit_deformation(residuals, params, 0, 2)
+
+
+def test_choose_mn_finds_the_fewest_terms() -> None:
+    truth = _deformation("c1", 3, 5)
+    params = RNG.random((600, 2))
+    residuals = truth.evaluate(params[:, 0], params[:, 1])
+    fit = choose_mn(residuals, params, tolerance=1e-9, kind="c1")
+    assert (fit.m, fit.n) == (3, 5)
+    np.testing.assert_allclose(fit.coefficients, truth.coefficients, atol=1e-9)
+
+
+def test_choose_mn_reports_an_unreachable_tolerance() -> None:
+    params = RNG.random((300, 2))
+    residuals = RNG.normal(size=(300, 3))  # noise: no smooth deformation fits it
+    with pytest.raises(
+        FitError, match=r"tolerance 1e-06 not reached with M = N <= 4 \(best max error"
+    ):
+        choose_mn(residuals, params, tolerance=1e-6, max_mn=4)
