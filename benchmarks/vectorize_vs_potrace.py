@@ -1,0 +1,307 @@
+"""Benchmark pde2cad.vectorize against potrace on the example images.
+
+Usage (from a plain checkout, with the project's venv python)::
+
+    python benchmarks/vectorize_vs_potrace.py                 # all examples/images/*.png
+    python benchmarks/vectorize_vs_potrace.py a.png b.png --json out.json
+    python benchmarks/vectorize_vs_potrace.py --potrace-only  # no pde2cad.vectorize needed
+
+For every image: pde2cad.vectorize with the default options (symmetry on) and with
+``symmetry=False``, and potrace (SVG backend, default options). Segments are Bézier curves
+plus lines (each counts one; potrace's corners are two lines). Errors are measured by
+:func:`pde2cad.image.evaluate.outline_error` against the ORIGINAL mask: the max over the
+exact pixel boundary of the distance to the nearest curve. Times are wall times (potrace:
+best of 3 subprocess runs including process start; ours: best of ``--repeat`` calls on the
+in-memory mask). Each vectorize call runs in a forked child process and is killed after
+``--timeout`` seconds (default 300), so one hanging image does not stop the run.
+
+Checks flagged per row: ``E`` our max error above the tolerance, ``R`` segments above
+``--ratio`` (0.55) x potrace's, ``S`` a ``sym_*`` image that does not get cheaper with
+symmetry, ``X`` vectorize failed or timed out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import shutil
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    import pde2cad  # noqa: F401
+except ImportError:  # plain checkout without an installed package
+    sys.path.insert(0, str(ROOT / "src"))
+
+from pde2cad.image.evaluate import outline_error, read_mask, run_potrace  # noqa: E402
+
+
+def load_mask(path: Path) -> np.ndarray:
+    """The mask the errors are measured against (the package's reader when available)."""
+    try:
+        from pde2cad.image.raster import read_image
+    except ImportError:
+        return read_mask(path)
+    return read_image(path)
+
+
+def get_vectorize() -> Any:
+    """pde2cad.vectorize, or None when the package does not provide it (yet)."""
+    try:
+        import pde2cad
+        from pde2cad.image import vectorize as _module  # noqa: F401
+    except ImportError:
+        return None
+    return getattr(pde2cad, "vectorize", None)
+
+
+def run_ours(
+    vectorize: Any, mask: np.ndarray, tolerance: float, repeat: int, **options: Any
+) -> dict[str, Any]:
+    best = float("inf")
+    drawing = None
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        drawing = vectorize(mask, tolerance=tolerance, **options)
+        best = min(best, time.perf_counter() - t0)
+    assert drawing is not None
+    curves = [np.asarray(lp.curves, dtype=float) for lp in drawing.loops]
+    return {
+        "segments": int(sum(len(c) for c in curves)),
+        "curves": curves,
+        "time_s": best,
+        "reported_max_error": float(drawing.max_error),
+        "symmetry": sorted({lp.symmetry for lp in drawing.loops if lp.symmetry}),
+    }
+
+
+def _child(conn: Any, vectorize: Any, args: tuple[Any, ...], options: dict[str, Any]) -> None:
+    try:
+        conn.send(("ok", run_ours(vectorize, *args, **options)))
+    except BaseException as exc:  # report everything to the parent
+        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    finally:
+        conn.close()
+
+
+def run_ours_limited(
+    vectorize: Any,
+    mask: np.ndarray,
+    tolerance: float,
+    repeat: int,
+    timeout: float,
+    **options: Any,
+) -> dict[str, Any]:
+    """:func:`run_ours` in a forked child process, killed after ``timeout`` seconds.
+
+    With ``timeout <= 0`` (or where fork is unavailable) it runs in this process.
+    """
+    if timeout <= 0 or "fork" not in mp.get_all_start_methods():
+        return run_ours(vectorize, mask, tolerance, repeat, **options)
+    ctx = mp.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(child, vectorize, (mask, tolerance, repeat), options))
+    proc.start()
+    child.close()
+    try:
+        if not parent.poll(timeout):
+            raise TimeoutError(f"vectorize took more than {timeout:g} s")
+        status, payload = parent.recv()
+    except EOFError:
+        raise RuntimeError("vectorize crashed (child process died)") from None
+    finally:
+        if proc.is_alive() and not parent.poll(0):
+            proc.terminate()
+        proc.join()
+        parent.close()
+    if status != "ok":
+        raise RuntimeError(payload)
+    return payload
+
+
+def bench_image(
+    path: Path,
+    vectorize: Any,
+    tolerance: float,
+    repeat: int,
+    ratio_limit: float,
+    timeout: float = 0.0,
+) -> dict[str, Any]:
+    mask = load_mask(path)
+    row: dict[str, Any] = {"image": path.stem, "width": mask.shape[1], "height": mask.shape[0]}
+    pt = run_potrace(mask)
+    pe = outline_error(mask, pt["curves"])
+    row.update(
+        potrace_segments=pt["segments"],
+        potrace_max_error=pe["max_boundary_to_curve"],
+        potrace_mean_error=pe["mean_boundary_to_curve"],
+        potrace_time_s=pt["time_s"],
+    )
+    if vectorize is None:
+        return row
+    flags = ""
+    try:
+        ours = run_ours_limited(vectorize, mask, tolerance, repeat, timeout)
+        nosym = run_ours_limited(vectorize, mask, tolerance, 1, timeout, symmetry=False)
+    except Exception as exc:  # keep benchmarking the other images
+        row["error"] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        row["traceback"] = f"{exc}\n{traceback.format_exc()}"
+        if not isinstance(exc, TimeoutError):
+            print(f"{path.name}: {row['traceback']}", file=sys.stderr)
+        row["flags"] = "X"
+        return row
+    oe = outline_error(mask, ours["curves"])
+    ne = outline_error(mask, nosym["curves"])
+    row.update(
+        ours_segments=ours["segments"],
+        ratio=ours["segments"] / max(pt["segments"], 1),
+        ours_nosym_segments=nosym["segments"],
+        ours_max_error=oe["max_boundary_to_curve"],
+        ours_mean_error=oe["mean_boundary_to_curve"],
+        ours_max_curve_to_boundary=oe["max_curve_to_boundary"],
+        ours_worst_point=oe["worst_boundary_point"],
+        ours_reported_max_error=ours["reported_max_error"],
+        ours_nosym_max_error=ne["max_boundary_to_curve"],
+        ours_time_s=ours["time_s"],
+        ours_nosym_time_s=nosym["time_s"],
+        time_ratio=ours["time_s"] / max(pt["time_s"], 1e-9),
+        symmetry=ours["symmetry"],
+    )
+    if max(oe["max_boundary_to_curve"], ne["max_boundary_to_curve"]) > tolerance * (1 + 1e-9):
+        flags += "E"
+    if row["ratio"] > ratio_limit:
+        flags += "R"
+    if path.stem.startswith("sym_") and not ours["segments"] < nosym["segments"]:
+        flags += "S"
+    row["flags"] = flags
+    return row
+
+
+def table_header(ours: bool) -> str:
+    if ours:
+        return (
+            f"{'image':24s} {'size':>9s} {'potrace':>7s} {'ours':>5s} {'ratio':>5s} {'nosym':>5s}"
+            f" {'err ours':>8s} {'err pot':>8s} {'t ours':>7s} {'t pot':>6s} {'t x':>6s} flags"
+        )
+    return (
+        f"{'image':24s} {'size':>9s} {'potrace':>7s} {'err pot':>8s} {'mean pot':>8s}"
+        f" {'t pot':>6s}"
+    )
+
+
+def table_row(r: dict[str, Any], ours: bool) -> str:
+    size = f"{r['width']}x{r['height']}"
+    if not ours:
+        return (
+            f"{r['image']:24s} {size:>9s} {r['potrace_segments']:7d} {r['potrace_max_error']:8.3f}"
+            f" {r['potrace_mean_error']:8.3f} {r['potrace_time_s']:6.3f}"
+        )
+    if "error" in r:
+        return f"{r['image']:24s} {size:>9s} {r['potrace_segments']:7d}  FAILED: {r['error']}"
+    return (
+        f"{r['image']:24s} {size:>9s} {r['potrace_segments']:7d} {r['ours_segments']:5d}"
+        f" {r['ratio']:5.2f} {r['ours_nosym_segments']:5d} {r['ours_max_error']:8.3f}"
+        f" {r['potrace_max_error']:8.3f} {r['ours_time_s']:7.3f} {r['potrace_time_s']:6.3f}"
+        f" {r['time_ratio']:6.1f} {r['flags']}"
+    )
+
+
+def totals(rows: list[dict[str, Any]], ours: bool) -> dict[str, Any]:
+    t: dict[str, Any] = {
+        "images": len(rows),
+        "potrace_segments": int(sum(r["potrace_segments"] for r in rows)),
+        "potrace_max_error": max((r["potrace_max_error"] for r in rows), default=0.0),
+        "potrace_time_s": float(sum(r["potrace_time_s"] for r in rows)),
+    }
+    ok = [r for r in rows if "ours_segments" in r]
+    if ours and ok:
+        pot_ok = sum(r["potrace_segments"] for r in ok)
+        t.update(
+            failed=len(rows) - len(ok),
+            potrace_segments_ok=int(pot_ok),
+            ours_segments=int(sum(r["ours_segments"] for r in ok)),
+            ours_nosym_segments=int(sum(r["ours_nosym_segments"] for r in ok)),
+            ratio=sum(r["ours_segments"] for r in ok) / max(pot_ok, 1),
+            ours_max_error=max(r["ours_max_error"] for r in ok),
+            ours_time_s=float(sum(r["ours_time_s"] for r in ok)),
+            time_ratio=sum(r["ours_time_s"] for r in ok)
+            / max(sum(r["potrace_time_s"] for r in ok), 1e-9),
+            flagged=[r["image"] + ":" + r["flags"] for r in rows if r.get("flags")],
+        )
+    return t
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument(
+        "images", nargs="*", type=Path, help="image files (default: examples/images/*.png)"
+    )
+    ap.add_argument("--tolerance", type=float, default=1.0)
+    ap.add_argument("--ratio", type=float, default=0.55, help="segment ratio flagged above this")
+    ap.add_argument("--repeat", type=int, default=1, help="timed runs of ours (best is kept)")
+    ap.add_argument(
+        "--timeout",
+        type=float,
+        default=300.0,
+        help="seconds per vectorize call before it is killed and the image marked failed"
+        " (runs in a forked child; 0 = in process, no limit)",
+    )
+    ap.add_argument("--potrace-only", action="store_true")
+    ap.add_argument("--json", type=Path, help="write all numbers to this JSON file")
+    args = ap.parse_args(argv)
+
+    if shutil.which("potrace") is None:
+        print("potrace is not installed (Debian package potrace)", file=sys.stderr)
+        return 2
+    images = args.images or sorted((ROOT / "examples" / "images").glob("*.png"))
+    if not images:
+        print("no images", file=sys.stderr)
+        return 2
+    vectorize = None if args.potrace_only else get_vectorize()
+    if vectorize is None and not args.potrace_only:
+        print("pde2cad.vectorize is not available: potrace only\n", file=sys.stderr)
+    ours = vectorize is not None
+
+    head = table_header(ours)
+    print(head)
+    print("-" * len(head), flush=True)
+    rows = []
+    for p in images:  # print each row as soon as it is done
+        rows.append(bench_image(p, vectorize, args.tolerance, args.repeat, args.ratio, args.timeout))
+        print(table_row(rows[-1], ours), flush=True)
+    tot = totals(rows, ours)
+    print()
+    if ours and "ours_segments" in tot:
+        print(
+            f"TOTAL segments ({len(rows) - tot['failed']} images vectorized):"
+            f" potrace {tot['potrace_segments_ok']}, ours {tot['ours_segments']}"
+            f" (ratio {tot['ratio']:.3f}), ours without symmetry {tot['ours_nosym_segments']}"
+        )
+        print(
+            f"max error: ours {tot['ours_max_error']:.4f} px,"
+            f" potrace {tot['potrace_max_error']:.4f} px"
+            f" | time: ours {tot['ours_time_s']:.2f} s, potrace {tot['potrace_time_s']:.2f} s"
+            f" (x{tot['time_ratio']:.1f})"
+        )
+        if tot["flagged"] or tot["failed"]:
+            print("flagged:", ", ".join(tot["flagged"]))
+    else:
+        print(
+            f"TOTAL potrace segments {tot['potrace_segments']}, max error"
+            f" {tot['potrace_max_error']:.4f} px, time {tot['potrace_time_s']:.2f} s"
+        )
+    if args.json:
+        out = {"tolerance": args.tolerance, "rows": rows, "totals": tot}
+        args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
