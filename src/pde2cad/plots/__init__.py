@@ -1,0 +1,1 @@
+"""Diagnostic plots (matplotlib, imported only inside the plotting functions)."""
