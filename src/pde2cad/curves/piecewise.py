@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pde2cad.curves import bezier
-from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, curve_to_polyline_distance, fit_cubic
+from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit, curve_to_polyline_distance, fit_cubic, minimax_refine
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.errors import InputError
 
@@ -27,6 +27,9 @@ MIN_POINTS = 4
 # The test runs on the points (pixel vertices); samples of the boundary between them can sit a
 # hair farther from the curve, so the test keeps a 2 % margin under the user's tolerance.
 SAFETY = 0.98
+# Fits whose maximum error is at most this factor over the tolerance get a minimax
+# refinement (reweighted least squares) before they are rejected.
+MINIMAX_RANGE = 1.4
 
 
 @dataclass
@@ -42,12 +45,16 @@ class ChainFit:
         Index of each piece's first point, then the last index.
     corners : list of int
         Indices of ``breaks`` where the join is sharp (C0 only).
+    ok : bool
+        Every piece passed the tolerance test (False only where even the shortest piece
+        could not meet it under the G1 constraints; callers then refit with C0 joins).
     """
 
     curves: NDArray[np.float64]
     fits: list[CubicFit]
     breaks: NDArray[np.int64]
     corners: list[int] = field(default_factory=list)
+    ok: bool = True
 
     @property
     def max_error(self) -> float:
@@ -107,6 +114,8 @@ class _Fitter:
             fit = fit_cubic(
                 pts, p0=p0, p3=p3, tan0=tan0, tan3=tan3, method=name, param_points=ppts, rounds=self.rounds
             )
+            if self.tol < fit.max_error <= MINIMAX_RANGE * self.tol:
+                fit = minimax_refine(fit, pts, p0, p3, _unit(tan0), _unit(tan3))
             ok = fit.max_error <= self.tol and curve_to_polyline_distance(fit.ctrl, pts) <= self.tol
             better = chosen is None or (ok, -fit.max_error) > (chosen_ok, -chosen.max_error)
             if better:
@@ -143,6 +152,8 @@ def fit_chain(
     join_tangents: NDArray[np.float64] | None = None,
     method: str = "optimal",
     rounds: int = NEWTON_ROUNDS,
+    c0_fallback: bool = True,
+    max_pieces: int | None = None,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -172,6 +183,11 @@ def fit_chain(
     rounds : int
         Newton reparameterization rounds per fit; a few suffice for noisy pixel data, smooth
         samples (3D boundaries) gain accuracy from more.
+    c0_fallback : bool
+        When a G1 piece cannot meet the tolerance, refit the chain with C0 joins (default).
+        Callers that have a plan B of their own (symmetric fits) switch it off.
+    max_pieces : int, optional
+        Give up (returning ``ok=False``) once more pieces than this are needed.
 
     Returns
     -------
@@ -202,6 +218,7 @@ def fit_chain(
     corners: list[int] = []
     guess = 32
     p0 = first_p
+    all_ok = True
     while start < end:
         fit, ok = fitter.fit(start, end, p0, last_p, tan, final_tan, best=False)
         if ok:
@@ -219,7 +236,11 @@ def fit_chain(
         p3 = last_p if stop == end else joins[stop]
         t3 = final_tan if stop == end else (None if jtan is None else jtan[stop])
         fit, ok = fitter.fit(start, stop, p0, p3, tan, t3, best=True)
+        all_ok = all_ok and ok
         pieces.append(fit)
+        if max_pieces is not None and len(pieces) > max_pieces and stop < end:
+            all_ok = False
+            break
         breaks.append(stop)
         guess = max(stop - start, MIN_POINTS)
         if stop < end and jtan is None:
@@ -228,7 +249,17 @@ def fit_chain(
         p0 = p3
         start = stop
     curves = np.stack([f.ctrl for f in pieces]) if pieces else np.zeros((0, 4, pts.shape[1]))
-    return ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners)
+    chain = ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners, all_ok)
+    if not all_ok and g1 and c0_fallback:
+        # Below about half a pixel a staircase leaves G1 joins no room: fall back to C0 joins
+        # on the points themselves, where a two-point piece is exact, so the tolerance holds.
+        fallback = fit_chain(
+            pts, tolerance, p_start=p_start, p_end=p_end, g1=False, param_points=ppts,
+            method=method, rounds=rounds,
+        )
+        if fallback.ok or fallback.max_error < chain.max_error:
+            return fallback
+    return chain
 
 
 def _longest_prefix(
@@ -240,7 +271,8 @@ def _longest_prefix(
     def test(m: int) -> tuple[CubicFit, bool]:
         return fitter.fit(start, m, p0, joins[m], tan, None if jtan is None else jtan[m], best=False)
 
-    lo = min(start + MIN_POINTS - 1, end - 1)
+    # Always advance: a piece of two points is a straight line that fits by construction.
+    lo = max(start + 1, min(start + MIN_POINTS - 1, end - 1))
     lo_fit: CubicFit | None = None
     hi = end
     m = min(start + max(guess, MIN_POINTS - 1), end - 1)
@@ -261,7 +293,13 @@ def _longest_prefix(
         else:
             hi = m
     if lo_fit is None:
-        lo_fit, _ = test(lo)
+        # Even the shortest regular piece fails: shorten down to two points (a straight
+        # piece, exact on its own points when its ends are free).
+        for m in range(lo, start, -1):
+            lo_fit, ok = test(m)
+            lo = m
+            if ok:
+                break
     return lo, lo_fit
 
 
@@ -283,7 +321,7 @@ def denoise(
     n = len(points)
 
     def window(w: int) -> int:
-        w = min(w, n if n % 2 else n - 1)
+        w = min(w | 1, n if n % 2 else n - 1)  # odd, at most n
         return w if w >= 5 else 0
 
     wp, wt = window(pos_window), window(tan_window)
@@ -372,6 +410,8 @@ def fit_closed(
                 tan_start=tan[offset], tan_end=tan[offset], g1=True,
                 param_points=pos[ring], join_tangents=tan[ring], method=method,
             )
+        if chain is not None and not chain.ok:
+            chain = None  # opened on the denoised curve it cannot hold: reopen on a vertex
         if chain is None or len(chain.fits) == 1:
             # One cubic cannot close G1 with itself: there the join is a corner.
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],

@@ -38,6 +38,10 @@ class OutlineLoop:
         Number of corners (sharp joins) on the loop.
     symmetry : str or None
         "mirror" or "rotation:k" when the loop was fitted on its fundamental part only.
+    fitted_curves : int
+        Independent curves: those of the fitted (fundamental) part for a symmetric loop, the
+        rest being its mirrored/rotated copies (the thesis's count, Section 3.1); otherwise
+        equal to the number of curves.
     """
 
     curves: NDArray[np.float64]
@@ -49,6 +53,11 @@ class OutlineLoop:
     parameterizations: list[str] = field(default_factory=list)
     corners: int = 0
     symmetry: str | None = None
+    fitted_curves: int = -1
+
+    def __post_init__(self) -> None:
+        if self.fitted_curves < 0:
+            self.fitted_curves = int(len(self.curves))
 
     @property
     def n_curves(self) -> int:
@@ -83,6 +92,11 @@ class Drawing:
     @property
     def n_curves(self) -> int:
         return int(sum(loop.n_curves for loop in self.loops))
+
+    @property
+    def n_fitted_curves(self) -> int:
+        """Independent curves (symmetric copies not counted), the thesis's measure."""
+        return int(sum(loop.fitted_curves for loop in self.loops))
 
     @property
     def max_error(self) -> float:
@@ -124,6 +138,7 @@ class Drawing:
             "shapes": len(self.shapes()),
             "loops": len(self.loops),
             "curves": self.n_curves,
+            "fitted_curves": self.n_fitted_curves,
             "max_error_px": self.max_error,
             "mean_error_px": self.mean_error,
             "time_s": self.time_s,
@@ -133,6 +148,7 @@ class Drawing:
                     "is_hole": lp.is_hole,
                     "depth": lp.depth,
                     "curves": lp.n_curves,
+                    "fitted_curves": lp.fitted_curves,
                     "corners": lp.corners,
                     "max_error_px": lp.max_error,
                     "mean_error_px": lp.mean_error,

@@ -450,6 +450,12 @@ def _mirrors(reg: _Region, iou_min: float, max_axes: int) -> list[Symmetry]:
         dphi = np.radians(2.0)
     else:
         starts, dphi = _scan_angles(reg, 2 * max_axes, floor=iou_min - 0.05)
+    if starts:
+        # Cheap screen before the costly refinement: a true axis already scores within a few
+        # per cent of iou_min unrefined (most loops have no mirror at all).
+        mats, offs = _mirror_maps(reg, np.array(starts), np.zeros(len(starts)))
+        pre = _iou(reg, mats, offs, reg.scan, smooth=True)
+        starts = [s for s, v in zip(starts, pre) if v >= iou_min - 0.1]
     # Stop once the axis moves the farthest pixel by under 0.02 px: far below pixel noise.
     tol = np.array([0.02 / max(reg.radius, 1.0), 0.02])
     band = _boundary_band(reg, 3.0 + 2.0 * (reg.radius * dphi + 1.0))

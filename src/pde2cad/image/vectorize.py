@@ -1,0 +1,324 @@
+"""Binary image -> outline drawing: the whole of thesis Chapter 3.
+
+Pipeline: threshold -> pixel-boundary loops with nesting -> corners -> per loop, optional
+symmetry (fit the fundamental part, map the curves) -> least-squares cubics with bisection
+break points, per-piece optimal parameterization and G1 joins -> :class:`Drawing`.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pde2cad.curves import bezier
+from pde2cad.curves.distance import points_to_curves
+from pde2cad.curves.parameterize import METHODS
+from pde2cad.curves.piecewise import SAFETY, ChainFit, denoise, fit_chain, fit_closed
+from pde2cad.errors import InputError
+from pde2cad.image.contours import ContourLoop, trace_loops
+from pde2cad.image.corners import CORNER_ANGLE, detect_corners
+from pde2cad.image.drawing import Drawing, OutlineLoop
+from pde2cad.image.raster import read_image, to_mask
+
+# How many symmetry candidates (best saving first) get a fit of their fundamental part.
+_SYMMETRY_CANDIDATES = 3
+# Loops smaller than this are not worth a symmetry search.
+_SYMMETRY_MIN_POINTS = 40
+
+
+def vectorize(
+    image: str | Path | NDArray[Any],
+    tolerance: float = 1.0,
+    *,
+    threshold: float | None = None,
+    invert: bool = False,
+    symmetry: bool = True,
+    g1: bool = True,
+    parameterization: str = "optimal",
+    corner_angle: float = CORNER_ANGLE,
+    dpi: float | None = None,
+    scale: float | None = None,
+) -> Drawing:
+    """Vectorize the boundary of a binary image into cubic Béziers.
+
+    Parameters
+    ----------
+    image : path or (H, W) / (H, W, C) array
+        PNG, BMP, PBM/PGM, JPEG or TIFF file, or an array (bool arrays are used as they are).
+    tolerance : float
+        Maximum distance in pixels from the pixel boundary to the curves (> 0).
+    threshold : float, optional
+        Grey level 0..255 separating foreground (dark) from background; Otsu by default.
+    invert : bool
+        Light pixels are the foreground.
+    symmetry : bool
+        Fit only the fundamental part of mirror- or rotation-symmetric loops when that saves
+        curves within the tolerance.
+    g1 : bool
+        Tangent-continuous joins where a break point is not a corner (default).
+    parameterization : str
+        "optimal" (per piece the best of uniform, chord, centripetal, Foley) or one of them.
+    corner_angle : float
+        Minimum turn in degrees (over 4 px) for a corner.
+    dpi, scale : float, optional
+        Physical size: dots per inch, or millimetres per pixel (give at most one).
+
+    Returns
+    -------
+    Drawing
+    """
+    started = time.perf_counter()
+    if not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"tolerance must be a number > 0 (pixels), got {tolerance!r}; try 1.0")
+    if parameterization != "optimal" and parameterization not in METHODS:
+        raise InputError(
+            f"unknown parameterization {parameterization!r}; use optimal, " + ", ".join(METHODS)
+        )
+    if not 0 < corner_angle < 180:
+        raise InputError(f"corner angle must be in (0, 180) degrees, got {corner_angle}")
+    mm_per_px = _scale(dpi, scale)
+    if isinstance(image, (str, Path)):
+        mask = read_image(image, threshold=threshold, invert=invert)
+        name = str(image)
+    else:
+        mask = to_mask(image, threshold=threshold, invert=invert)
+        name = "the image"
+    if not mask.any():
+        raise InputError(
+            f"{name} has no foreground pixels after thresholding; "
+            "check --threshold or use --invert for light shapes on a dark background"
+        )
+    loops = [
+        _fit_loop(c, tolerance, symmetry, g1, parameterization, corner_angle) for c in trace_loops(mask)
+    ]
+    return Drawing(
+        width=int(mask.shape[1]),
+        height=int(mask.shape[0]),
+        loops=loops,
+        tolerance=float(tolerance),
+        mm_per_px=mm_per_px,
+        time_s=time.perf_counter() - started,
+    )
+
+
+def _scale(dpi: float | None, scale: float | None) -> float | None:
+    if dpi is not None and scale is not None:
+        raise InputError("give either dpi or scale (mm per pixel), not both")
+    if dpi is not None:
+        if not (np.isfinite(dpi) and dpi > 0):
+            raise InputError(f"dpi must be > 0, got {dpi}")
+        return 25.4 / float(dpi)
+    if scale is not None:
+        if not (np.isfinite(scale) and scale > 0):
+            raise InputError(f"scale must be > 0 mm per pixel, got {scale}")
+        return float(scale)
+    return None
+
+
+def _fit_loop(
+    contour: ContourLoop, tol: float, symmetry: bool, g1: bool, method: str, corner_angle: float
+) -> OutlineLoop:
+    pts = contour.points
+    corners = detect_corners(pts, angle=corner_angle)
+    chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method)
+    curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
+    max_err, mean_err = chain.max_error, chain.mean_error
+    sym_name = None
+    fitted = len(curves)
+    if symmetry and len(pts) >= _SYMMETRY_MIN_POINTS and len(curves) > 1:
+        found = _fit_symmetric(pts, corners, tol, g1, method, len(curves))
+        if found is not None:
+            curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
+    return OutlineLoop(
+        curves=curves,
+        is_hole=contour.is_hole,
+        shape=contour.shape,
+        depth=contour.depth,
+        max_error=float(max_err),
+        mean_error=float(mean_err),
+        parameterizations=list(methods),
+        corners=int(n_corners),
+        symmetry=sym_name,
+        fitted_curves=int(fitted),
+    )
+
+
+def _fit_symmetric(
+    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str, plain: int
+) -> tuple | None:
+    """Fit the fundamental part of the best symmetry that saves curves; None if none does.
+
+    A symmetric loop is stored as its fitted part plus the transform (Section 3.1): it
+    "saves curves" when the fitted part has fewer curves than the plain fit of the whole
+    loop, and it is only taken when the written outline (part + mapped copies) is no longer
+    than the plain one and stays within the tolerance of the real boundary everywhere.
+    """
+    from pde2cad.image.symmetry import detect_symmetry, fundamental_split
+
+    best = None
+    # Candidates come best saving first; the first one that passes is kept, and only the
+    # first few are tried (each costs a fit of its fundamental part).
+    for sym in detect_symmetry(pts, corners=corners)[:_SYMMETRY_CANDIDATES]:
+        if best is not None:
+            break
+        copies = 2 if sym.kind == "mirror" else sym.order
+        if plain < copies:
+            continue
+        i0, i1 = fundamental_split(pts, sym, corners=corners)
+        part = _fit_part(pts, corners, sym, i0, i1, tol, g1, method, plain)
+        if part is None:
+            continue
+        chain, full, part_corners = part
+        if len(full) > plain or len(chain.curves) >= plain:
+            continue
+        errors = points_to_curves(pts, full)
+        if errors.max() <= tol * SAFETY and _curves_near_loop(full, pts, tol * SAFETY):
+            name = "mirror" if sym.kind == "mirror" else f"rotation:{sym.order}"
+            best = (full, chain.methods * copies, part_corners * copies,
+                    float(errors.max()), float(errors.mean()), name, len(chain.curves))
+    return best
+
+
+def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method: str, plain: int):
+    """Fit the run i0..i1 with exact end points on the symmetry and map it around."""
+    n = len(pts)
+    length = (i1 - i0) % n
+    if length < 4:
+        return None
+    idx = (i0 + np.arange(length + 1)) % n
+    run = pts[idx]
+    near = lambda i: corners.size > 0 and np.min(np.abs((corners - i + n // 2) % n - n // 2)) <= 2  # noqa: E731
+    pos, tan = denoise(run, closed=False)
+    c_start, c_end = near(i0), near(i1)
+    if sym.kind == "mirror":
+        axis, center = sym.axis, sym.center
+        p_start = center + np.dot(run[0] - center, axis) * axis
+        p_end = center + np.dot(run[-1] - center, axis) * axis
+        normal = np.array([-axis[1], axis[0]])
+        t_start = None if c_start else normal * np.sign(np.dot(normal, tan[0]) or 1.0)
+        t_end = None if c_end else normal * np.sign(np.dot(normal, tan[-1]) or 1.0)
+    else:
+        p_start = run[0] if c_start else pos[0]
+        p_end = sym.apply(p_start)
+        t_start = None if c_start else tan[0]
+        t_end = None if c_start else sym.matrix @ tan[0]
+    local = np.sort(((corners - i0) % n)[((corners - i0) % n) <= length]) if corners.size else np.arange(0)
+    local = local[(local > 2) & (local < length - 2)]
+    merged, cuts, copies = _pooled_run(pts, sym, i0, i1, run, local)
+    budget = plain // copies  # past this the written outline would grow
+    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget)
+    if chain is None:
+        return None
+    if sym.kind == "mirror":
+        mirrored = sym.apply(chain.curves)[::-1, ::-1]
+        full = np.concatenate([chain.curves, mirrored])
+    else:
+        copies = [chain.curves]
+        for _ in range(sym.order - 1):
+            copies.append(sym.apply(copies[-1]))
+        full = np.concatenate(copies)
+    part_corners = len(local) + (1 if c_start else 0)
+    return chain, full, part_corners
+
+
+def _pooled_run(pts, sym, i0: int, i1: int, run, local):
+    """The fundamental run with every other part mapped back onto it, ordered along it.
+
+    A rotation by 2 pi / k (or a tilted mirror) is no symmetry of the pixel grid: each part
+    is a different staircase around the same curve. Fitting all of them at once averages
+    their raster noise and makes the tolerance test hold for every copy by construction.
+
+    Returns the pooled points, the positions of the run's corners in them, and the number
+    of parts pooled.
+    """
+    n = len(pts)
+    inverse = sym.inverse()
+    parts = [run]
+    if sym.kind == "mirror":
+        other = pts[(i1 + np.arange((i0 - i1) % n + 1)) % n]
+        parts.append(sym.apply(other)[::-1])
+    else:
+        m = len(run) - 1
+        starts = [i0]
+        for j in range(1, sym.order + 1):
+            target = pts[i0]
+            for _ in range(j):
+                target = sym.apply(target)
+            guess = (i0 + j * m) % n
+            window = (guess + np.arange(-m // 3, m // 3 + 1)) % n
+            starts.append(int(window[np.argmin(np.sum((pts[window] - target) ** 2, axis=1))]))
+        starts[-1] = i0
+        for j in range(1, sym.order):
+            seg = pts[(starts[j] + np.arange((starts[j + 1] - starts[j]) % n + 1)) % n]
+            for _ in range(j):
+                seg = inverse.apply(seg)
+            parts.append(seg)
+    params, owner, index = [], [], []
+    for j, part in enumerate(parts):
+        step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
+        arc = np.r_[0.0, np.cumsum(step)]
+        params.append(arc / max(arc[-1], 1e-12))
+        owner.append(np.full(len(part), j))
+        index.append(np.arange(len(part)))
+    s = np.concatenate(params)
+    own = np.concatenate(owner)
+    order = np.lexsort((own, s))
+    merged = np.concatenate(parts)[order]
+    # The run's own first and last points bound the pooled run (its exact ends).
+    position = np.empty(len(order), dtype=np.int64)
+    position[order] = np.arange(len(order))
+    first = position[0]
+    last = position[len(run) - 1]
+    keep = np.ones(len(merged), bool)
+    keep[: first] = False
+    keep[last + 1 :] = False
+    offset_run = np.flatnonzero(own == 0)  # rows of the run in the concatenation
+    cuts = position[offset_run[local]] - first
+    merged = merged[keep]
+    return merged, np.sort(cuts[(cuts > 0) & (cuts < len(merged) - 1)]), len(parts)
+
+
+def _fit_run(
+    run, local_corners, tol, p_start, p_end, t_start, t_end, g1, method, copies=1, budget=None
+) -> ChainFit | None:
+    """Fit an open run split at its corners, with given end points and end tangents; None
+    when some piece cannot meet the tolerance (the symmetry is then not worth it)."""
+    cuts = np.r_[0, local_corners, len(run) - 1].astype(int)
+    curves, fits, breaks = [], [], [0]
+    for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        sub = run[a : b + 1]
+        pos, tan = denoise(sub, closed=False, pos_window=7 * copies, tan_window=17 * copies)
+        first, last = j == 0, j == len(cuts) - 2
+        chain = fit_chain(
+            sub, tol,
+            p_start=p_start if first else None, p_end=p_end if last else None,
+            tan_start=t_start if first else None, tan_end=t_end if last else None,
+            g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
+            max_pieces=None if budget is None else budget - len(fits),
+        )
+        if not chain.ok:
+            return None
+        curves.append(chain.curves)
+        fits.extend(chain.fits)
+        breaks.extend(int(a) + chain.breaks[1:])
+    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64))
+
+
+def _curves_near_loop(curves: NDArray[np.float64], pts: NDArray[np.float64], tol: float) -> bool:
+    """True when samples of every curve lie within ``tol`` of the closed loop polygon."""
+    from scipy.spatial import cKDTree
+
+    closed = np.vstack([pts, pts[:1]])
+
+    # Dense samples of the polygon edges make a KD-tree query exact to 1/8 px.
+    steps = 8
+    seg = closed[:-1, None, :] + (np.arange(steps) / steps)[None, :, None] * np.diff(closed, axis=0)[:, None, :]
+    tree = cKDTree(seg.reshape(-1, 2))
+    samples = bezier.sample_chain(curves, 24)
+    d, _ = tree.query(samples)
+    # Sample spacing only overestimates the distance, so the test stays conservative.
+    return bool(d.max() <= tol)
