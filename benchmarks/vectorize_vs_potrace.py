@@ -75,6 +75,7 @@ def run_ours(
     curves = [np.asarray(lp.curves, dtype=float) for lp in drawing.loops]
     return {
         "segments": int(sum(len(c) for c in curves)),
+        "fitted": int(getattr(drawing, "n_fitted_curves", sum(len(c) for c in curves))),
         "curves": curves,
         "time_s": best,
         "reported_max_error": float(drawing.max_error),
@@ -163,6 +164,7 @@ def bench_image(
         ours_segments=ours["segments"],
         ratio=ours["segments"] / max(pt["segments"], 1),
         ours_nosym_segments=nosym["segments"],
+        ours_fitted=ours["fitted"],
         ours_max_error=oe["max_boundary_to_curve"],
         ours_mean_error=oe["mean_boundary_to_curve"],
         ours_max_curve_to_boundary=oe["max_curve_to_boundary"],
@@ -178,7 +180,7 @@ def bench_image(
         flags += "E"
     if row["ratio"] > ratio_limit:
         flags += "R"
-    if path.stem.startswith("sym_") and not ours["segments"] < nosym["segments"]:
+    if path.stem.startswith("sym_") and not ours["fitted"] < nosym["segments"]:
         flags += "S"
     row["flags"] = flags
     return row
@@ -187,7 +189,7 @@ def bench_image(
 def table_header(ours: bool) -> str:
     if ours:
         return (
-            f"{'image':24s} {'size':>9s} {'potrace':>7s} {'ours':>5s} {'ratio':>5s} {'nosym':>5s}"
+            f"{'image':24s} {'size':>9s} {'potrace':>7s} {'ours':>5s} {'ratio':>5s} {'fit':>4s} {'nosym':>5s}"
             f" {'err ours':>8s} {'err pot':>8s} {'t ours':>7s} {'t pot':>6s} {'t x':>6s} flags"
         )
     return (
@@ -207,7 +209,7 @@ def table_row(r: dict[str, Any], ours: bool) -> str:
         return f"{r['image']:24s} {size:>9s} {r['potrace_segments']:7d}  FAILED: {r['error']}"
     return (
         f"{r['image']:24s} {size:>9s} {r['potrace_segments']:7d} {r['ours_segments']:5d}"
-        f" {r['ratio']:5.2f} {r['ours_nosym_segments']:5d} {r['ours_max_error']:8.3f}"
+        f" {r['ratio']:5.2f} {r['ours_fitted']:4d} {r['ours_nosym_segments']:5d} {r['ours_max_error']:8.3f}"
         f" {r['potrace_max_error']:8.3f} {r['ours_time_s']:7.3f} {r['potrace_time_s']:6.3f}"
         f" {r['time_ratio']:6.1f} {r['flags']}"
     )
@@ -228,6 +230,7 @@ def totals(rows: list[dict[str, Any]], ours: bool) -> dict[str, Any]:
             potrace_segments_ok=int(pot_ok),
             ours_segments=int(sum(r["ours_segments"] for r in ok)),
             ours_nosym_segments=int(sum(r["ours_nosym_segments"] for r in ok)),
+            ours_fitted=int(sum(r["ours_fitted"] for r in ok)),
             ratio=sum(r["ours_segments"] for r in ok) / max(pot_ok, 1),
             ours_max_error=max(r["ours_max_error"] for r in ok),
             ours_time_s=float(sum(r["ours_time_s"] for r in ok)),
@@ -282,7 +285,8 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"TOTAL segments ({len(rows) - tot['failed']} images vectorized):"
             f" potrace {tot['potrace_segments_ok']}, ours {tot['ours_segments']}"
-            f" (ratio {tot['ratio']:.3f}), ours without symmetry {tot['ours_nosym_segments']}"
+            f" (ratio {tot['ratio']:.3f}), fitted (symmetric parts once) {tot['ours_fitted']},"
+            f" ours without symmetry {tot['ours_nosym_segments']}"
         )
         print(
             f"max error: ours {tot['ours_max_error']:.4f} px,"

@@ -17,6 +17,8 @@ __all__ = [
     "InputError",
     "Pde2CadError",
     "__version__",
+    "fit_patch",
+    "fit_pde_surface",
     "vectorize",
 ]
 
@@ -26,3 +28,19 @@ def vectorize(image_or_path, tolerance: float = 1.0, **options):  # noqa: ANN001
     from pde2cad.image.vectorize import vectorize as _vectorize
 
     return _vectorize(image_or_path, tolerance=tolerance, **options)
+
+
+def fit_patch(points, **options):  # noqa: ANN001, ANN201
+    """Fit one Coons + PDE-deformation patch to a region's points; see
+    :func:`pde2cad.surfaces.patch.fit_patch`."""
+    from pde2cad.surfaces.patch import fit_patch as _fit_patch
+
+    return _fit_patch(points, **options)
+
+
+def fit_pde_surface(points, params=None, **options):  # noqa: ANN001, ANN201
+    """Fit a closed-form 4th-order PDE patch (Chapter 4); see
+    :func:`pde2cad.surfaces.pde_closed_form.fit_pde_surface`."""
+    from pde2cad.surfaces.pde_closed_form import fit_pde_surface as _fit
+
+    return _fit(points, params, **options)

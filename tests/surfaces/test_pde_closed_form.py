@@ -20,7 +20,7 @@ from pde2cad.surfaces.pde_closed_form import (
     plane_parameterization,
 )
 
-NOSE16 = Path("/work/shared/data/nose16.csv")
+NOSE16 = Path(__file__).resolve().parents[2] / "examples" / "data" / "nose16.csv"
 
 # Table 4.3 (mean errors of X1..X4 on the 16 nose points) and Table 4.2 (X4: max 5.52e-5).
 THESIS_MEAN_16 = {"X1": 4.9378e-4, "X2": 4.1927e-5, "X3": 1.2499e-4, "X4": 2.31e-5}
