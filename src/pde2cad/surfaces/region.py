@@ -1,0 +1,846 @@
+"""Boundary and corners of one segmented region of a point cloud (thesis Sections 5.2.1-5.2.2).
+
+Pipeline (Fig. 5.1(c)-(d)):
+
+1. Project the region's points onto their PCA plane (centroid + two main axes). The region must
+   be *projectable*: a height field over that plane. A region that folds over itself overlaps
+   in the projection; where its alpha shape then pinches or falls apart,
+   :func:`boundary_loop` raises an :class:`~pde2cad.errors.InputError` saying so. A fold whose
+   projection is still one simple shape is not detected: split such regions first.
+2. Alpha shape of the projected points (Edelsbrunner): Delaunay triangles with circumradius
+   below ``alpha``; edges used by exactly one kept triangle form the boundary, chained into
+   one counter-clockwise loop (:func:`boundary_loop`).
+3. Corners: the 4 (or 3) loop points of highest discrete curvature ``k = 4S/(abc)``
+   (Fig. 5.2, :func:`corner_curvature`) with non-maximum suppression so two corners are never
+   side by side (:func:`detect_region_corners`). A detected corner is then placed where its
+   two sides meet (:func:`refine_corners`): the tip of an unordered cloud's corner lies
+   beyond its nearest sample.
+4. Sides: the loop points between consecutive corners, in 3D, fitted by the Chapter 3 chain
+   fitter (:func:`pde2cad.curves.piecewise.fit_chain`) with the corners as exact end points.
+
+Side-order contract of :class:`RegionBoundary`
+---------------------------------------------
+The loop runs counter-clockwise in the projection frame ``(u, v)``, whose axes with the plane
+normal ``axes[2]`` form a right-handed frame. Corner 0 is the detected corner with the
+smallest ``u + v`` (the "bottom-left" one), or the caller's first corner. Side ``k`` runs from
+corner ``k`` to corner ``k + 1`` (the last back to corner 0), so for four corners
+``BilinearCoons.from_loop(*sides)`` gives a patch with ``S(0, 0)`` at corner 0 and unit normal
+``S_u x S_v`` pointing along ``axes[2]``; for three corners use ``three_sided(*sides)`` (the
+apex ``S(., 1)`` is corner 2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import maximum_filter1d
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from pde2cad.curves.piecewise import denoise, fit_chain
+from pde2cad.errors import FitError, InputError
+from pde2cad.surfaces.boundary import PiecewiseBezier
+
+#: Fewest points a region may have (a boundary loop and four sides need a few each).
+MIN_POINTS = 10
+#: Default alpha = ALPHA_FACTOR * median nearest-neighbour distance. For uniformly random
+#: samples (median NN distance ~0.47 s, s = sqrt(area / N)) this is ~2.3 s, where the Poisson-
+#: Delaunay circumradius tail P(R > r) = (1 + pi r^2/s^2) exp(-pi r^2/s^2) is ~1e-6: no sampling
+#: gaps open inside the region. On a regular grid of spacing h it is 5 h.
+ALPHA_FACTOR = 5.0
+#: A default alpha that leaves the loop pinched, split or full of small gaps grows by this
+#: factor up to ALPHA_RETRIES times (re-thresholding the same triangulation: cheap).
+ALPHA_GROWTH = 1.5
+ALPHA_RETRIES = 4
+#: Holes smaller than HOLE_AREA * alpha0^2 are sampling gaps (alpha too small); larger ones
+#: are real holes of the region and are ignored (only the outer loop matters).
+HOLE_AREA = 10.0
+#: Pieces split off the main region with less than this share of its area are outlier
+#: clusters and are dropped; bigger ones mean the region falls apart at this alpha.
+ISLAND_SHARE = 0.01
+#: Above this many points the alpha shape is computed on a band around a coarse boundary
+#: (Delaunay of 10^6 points takes ~20 s; the interior does not change the outer loop).
+BAND_POINTS = 200_000
+COARSE_POINTS = 50_000
+#: A curvature peak is "clearly a corner" when the boundary turns by at least this many
+#: degrees over +-step (a 90-degree corner turns 90, a disc of 48 steps ~15 plus noise).
+CORNER_ANGLE = 40.0
+#: Default minimum spacing of two corners along the loop: perimeter / CORNER_SPACING.
+#: Sides shorter than that (aspect ratio beyond ~7:1) need ``corners=``.
+CORNER_SPACING = 16
+#: Detected corners are re-placed where the two sides meet, each side's tangent line taken
+#: from a quadratic fit over perimeter / REFINE_SPAN of arc length (see refine_corners).
+REFINE_SPAN = 16
+#: Default tolerance of the side fits: NOISE_FACTOR * RMS distance of the loop points to a
+#: smoothed copy of their side, at least TOLERANCE_FLOOR * bounding-box diagonal.
+NOISE_FACTOR = 3.0
+TOLERANCE_FLOOR = 1e-4
+#: Newton rounds of the side fits: boundary points are smooth samples, more rounds help.
+SIDE_ROUNDS = 10
+
+
+@dataclass(frozen=True)
+class RegionBoundary:
+    """The boundary of one region: an ordered loop, 3 or 4 corners and the fitted sides.
+
+    Attributes
+    ----------
+    loop : (n, 3) float
+        Boundary points in loop order (closed implicitly), counter-clockwise in the projection
+        frame, starting at corner 0.
+    loop_index : (n,) int
+        Row of each loop point in the input ``points``.
+    corners : (c,) int
+        Indices into ``loop`` of the ``c`` in {3, 4} corners (the loop point nearest each),
+        increasing; ``corners[0] == 0``. The corner positions themselves are
+        :attr:`corner_points`, which may lie slightly beyond the loop point (detected corners
+        are refined, given coordinates are used as given).
+    sides : tuple of c PiecewiseBezier
+        Head-to-tail: ``sides[k]`` runs from corner ``k`` to corner ``k + 1`` (the last one
+        back to corner 0). Consecutive sides share the identical corner point. Four sides feed
+        ``BilinearCoons.from_loop(*sides)``, three ``three_sided(*sides)``.
+    frame : (origin (3,), axes (3, 3))
+        The projection: ``(u, v) = (p - origin) @ axes[:2].T``; ``axes`` rows are the PCA axes
+        (right-handed), ``axes[2]`` is the plane normal and the patch normal.
+    side_errors : (c,) float
+        Largest distance from a side's boundary points to its curve (an upper bound: the
+        distance to the curve point at each point's parameter).
+    tolerance : float
+        The tolerance the sides were fitted with.
+    """
+
+    loop: NDArray[np.float64]
+    loop_index: NDArray[np.int64]
+    corners: NDArray[np.int64]
+    sides: tuple[PiecewiseBezier, ...]
+    frame: tuple[NDArray[np.float64], NDArray[np.float64]]
+    side_errors: NDArray[np.float64]
+    tolerance: float
+
+    @property
+    def corner_points(self) -> NDArray[np.float64]:
+        """Corner positions ``(c, 3)``: the start point of each side."""
+        return np.stack([s.start for s in self.sides])
+
+
+# --------------------------------------------------------------------------- input checks
+def _as_points(points: ArrayLike, dim: int, what: str) -> NDArray[np.float64]:
+    """``points`` as a finite ``(N, dim)`` float array with N >= MIN_POINTS, or InputError."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != dim:
+        raise InputError(f"{what} must have shape (N, {dim}), got {pts.shape}")
+    if len(pts) < MIN_POINTS:
+        raise InputError(
+            f"{what} has {len(pts)} points; a region needs at least {MIN_POINTS} to have a "
+            "boundary with corners — pass the whole segmented region"
+        )
+    if not np.isfinite(pts).all():
+        bad = int((~np.isfinite(pts)).any(axis=1).sum())
+        raise InputError(f"{what} contains NaN or inf in {bad} rows; remove those rows first")
+    return pts
+
+
+def pca_frame(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Centroid and PCA axes of ``points`` (N, 3).
+
+    Returns
+    -------
+    origin : (3,) float
+    axes : (3, 3) float
+        Rows: the main axis, the second axis and their cross product (the plane normal), so
+        the frame is right-handed. Signs are fixed (largest component of each of the first two
+        axes positive) so the result does not depend on the eigen-solver.
+
+    Raises
+    ------
+    InputError
+        If the points are (nearly) collinear or coincident.
+    """
+    origin = points.mean(axis=0)
+    centred = points - origin
+    # 3x3 covariance + eigh rather than an SVD of the (N, 3) data: same axes, far cheaper.
+    cov = centred.T @ centred / len(points)
+    values, vectors = np.linalg.eigh(cov)
+    values, vectors = values[::-1], vectors[:, ::-1]
+    if not values[0] > 0 or values[1] <= 1e-12 * values[0]:
+        raise InputError(
+            "the points are collinear or coincident, so they span no surface region; "
+            "pass the points of a 2D region (a patch), not of a curve"
+        )
+    axes = vectors[:, :2].T.copy()
+    flip = np.sign(axes[np.arange(2), np.abs(axes).argmax(axis=1)])
+    axes *= flip[:, None]
+    return origin, np.vstack([axes, np.cross(axes[0], axes[1])])
+
+
+# --------------------------------------------------------------------------- alpha shape
+def default_alpha(points2d: NDArray[np.float64]) -> float:
+    """``ALPHA_FACTOR`` times the median nearest-neighbour distance of ``points2d`` (N, 2).
+
+    The median is taken over at most 20,000 query points (against all points), which is
+    exact enough and keeps 10^6 points cheap. Duplicate points (distance 0) are skipped.
+    """
+    n = len(points2d)
+    tree = cKDTree(points2d)
+    query = points2d[:: max(1, n // 20_000)]
+    dist, _ = tree.query(query, k=4)
+    # First positive neighbour distance of each query point: duplicates give zeros.
+    positive = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1)
+    positive = positive[np.isfinite(positive)]
+    if not positive.size:
+        raise InputError("all points coincide; a region needs distinct points")
+    return ALPHA_FACTOR * float(np.median(positive))
+
+
+def _triangulate(points2d: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Delaunay triangles ``(T, 3)`` of ``points2d``, every one counter-clockwise."""
+    try:
+        tri = Delaunay(points2d).simplices.astype(np.int64)
+    except QhullError as exc:
+        raise InputError(
+            "the projected points are collinear or degenerate, so they have no 2D boundary; "
+            f"pass the points of a surface region (qhull: {str(exc).splitlines()[0]})"
+        ) from exc
+    a, b, c = (points2d[tri[:, i]] for i in range(3))
+    cross = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tri[cross < 0] = tri[cross < 0][:, ::-1]
+    return tri
+
+
+def _circumradius(points2d: NDArray[np.float64], tri: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Circumradius ``R = abc / (4S)`` of each triangle (T,); inf for degenerate ones."""
+    a, b, c = (points2d[tri[:, i]] for i in range(3))
+    la = np.linalg.norm(b - c, axis=1)
+    lb = np.linalg.norm(c - a, axis=1)
+    lc = np.linalg.norm(a - b, axis=1)
+    ab, ac = b - a, c - a
+    area2 = np.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius = la * lb * lc / (2.0 * area2)
+    return np.where(area2 > 0, radius, np.inf)
+
+
+def _order_cycle(nxt: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Order of the vertices of one cycle given by the successor map ``nxt`` (m,).
+
+    List ranking by pointer jumping (Wyllie): the cycle is cut before vertex 0, then every
+    vertex learns its distance to the cut end in log2(m) vectorized doubling steps.
+    """
+    m = len(nxt)
+    succ = nxt.copy()
+    dist = np.ones(m, dtype=np.int64)
+    last = int(np.flatnonzero(nxt == 0)[0])
+    succ[last] = last
+    dist[last] = 0
+    for _ in range(int(np.ceil(np.log2(max(m, 2)))) + 1):
+        dist = dist + dist[succ]
+        succ = succ[succ]
+    return np.argsort(-dist, kind="stable")
+
+
+def _outer_loop(
+    points2d: NDArray[np.float64], tri: NDArray[np.int64], hole_area: float
+) -> tuple[NDArray[np.int64] | None, str | None]:
+    """The outer boundary loop of the union of triangles ``tri`` (counter-clockwise).
+
+    Returns ``(loop, None)``, or ``(None, problem)`` naming why there is no simple loop.
+    """
+    if len(tri) == 0:
+        return None, "no Delaunay triangle is smaller than alpha"
+    n = len(points2d)
+    # Directed edges of the CCW triangles; an edge used once (either direction) is boundary,
+    # and keeps the direction of its only triangle, so the outer loop runs CCW.
+    edges = tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.minimum(edges[:, 0], edges[:, 1]) * n + np.maximum(edges[:, 0], edges[:, 1])
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    bnd = edges[counts[inverse.reshape(-1)] == 1]
+    verts, local = np.unique(bnd, return_inverse=True)
+    local = local.reshape(-1, 2)
+    m = len(verts)
+    graph = coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(m, m))
+    n_comp, label = connected_components(graph, directed=False)
+    src, dst = points2d[verts[local[:, 0]]], points2d[verts[local[:, 1]]]
+    # Shoelace per component: the sum over its directed edges of the cross products. Outer
+    # loops come out positive (CCW), holes negative.
+    cross = 0.5 * (src[:, 0] * dst[:, 1] - dst[:, 0] * src[:, 1])
+    area = np.bincount(label[local[:, 0]], weights=cross, minlength=n_comp)
+    outer = int(area.argmax())
+    out_degree = np.bincount(local[:, 0], minlength=m)
+    in_outer = label == outer
+    pinches = int((out_degree[in_outer] != 1).sum())
+    if pinches:
+        return None, (
+            f"the boundary pinches at {pinches} point(s) (the region touches itself in the "
+            "projection, e.g. it folds over itself or is sampled too sparsely there)"
+        )
+    islands = np.flatnonzero((area > ISLAND_SHARE * area[outer]) & (np.arange(n_comp) != outer))
+    if len(islands):
+        return None, (
+            f"the region falls apart into {len(islands) + 1} pieces (sampling gaps wider than "
+            "alpha, or several regions passed as one)"
+        )
+    gaps = int(((area < 0) & (-area < hole_area)).sum())
+    if gaps:
+        return None, f"{gaps} small hole(s) open inside the region (sampling gaps wider than alpha)"
+    # Successor map of the outer loop (out-degree 1 everywhere, so it is one cycle).
+    rows = np.flatnonzero(in_outer[local[:, 0]])
+    outer_verts = np.flatnonzero(in_outer)
+    position = np.full(m, -1, dtype=np.int64)
+    position[outer_verts] = np.arange(len(outer_verts))
+    nxt = np.empty(len(outer_verts), dtype=np.int64)
+    nxt[position[local[rows, 0]]] = position[local[rows, 1]]
+    order = _order_cycle(nxt)
+    return verts[outer_verts[order]], None
+
+
+def _band(points2d: NDArray[np.float64], alpha: float) -> NDArray[np.int64]:
+    """Indices of the points near the boundary of a large cloud.
+
+    A random subset of COARSE_POINTS gives a coarse outer loop (alpha scaled by the spacing
+    ratio); the fine boundary lies within ~alpha_coarse of it, and a fine triangle there only
+    sees points within 2 alpha. So the points within ``1.5 alpha_coarse + 3 alpha`` of the
+    coarse loop have the same outer alpha-shape boundary as the whole cloud.
+    """
+    n = len(points2d)
+    rng = np.random.default_rng(0)
+    sub = np.sort(rng.choice(n, COARSE_POINTS, replace=False))
+    coarse_alpha = alpha * np.sqrt(n / COARSE_POINTS)
+    coarse = sub[boundary_loop(points2d[sub], coarse_alpha, retry=True)]
+    ring = points2d[coarse]
+    seg = np.linalg.norm(np.roll(ring, -1, axis=0) - ring, axis=1)
+    # Distance to the nearest loop vertex bounds the distance to the polyline from above by
+    # half the longest segment.
+    reach = 1.5 * coarse_alpha + 3.0 * alpha + 0.5 * float(seg.max())
+    dist, _ = cKDTree(ring).query(points2d, distance_upper_bound=reach)
+    return np.flatnonzero(np.isfinite(dist))
+
+
+def boundary_loop(
+    points2d: ArrayLike, alpha: float | None = None, *, retry: bool | None = None
+) -> NDArray[np.int64]:
+    """Ordered outer boundary of the alpha shape of 2D points (Section 5.2.1).
+
+    Delaunay triangles with circumradius ``< alpha`` are kept; edges used by exactly one kept
+    triangle are boundary edges; they are chained (vectorized list ranking) into loops and the
+    outer one (largest area) is returned.
+
+    Parameters
+    ----------
+    points2d : (N, 2) float, N >= 10
+    alpha : float, optional
+        Circumradius threshold (the alpha-disc radius), in the points' units. Default
+        :func:`default_alpha` (5 x the median nearest-neighbour distance). Larger values bridge
+        concavities narrower than ~2 alpha; smaller ones open gaps in sparse parts.
+    retry : bool, optional
+        Grow alpha by ALPHA_GROWTH (up to ALPHA_RETRIES times) while the loop pinches, splits
+        or has small holes. Default: only when ``alpha`` was not given.
+
+    Returns
+    -------
+    (n,) int
+        Indices into ``points2d`` of the loop, counter-clockwise, closed implicitly.
+
+    Raises
+    ------
+    InputError
+        On bad input, or if no alpha gives one simple loop (the message names the problem).
+
+    Notes
+    -----
+    Holes larger than ``HOLE_AREA * alpha^2`` (real holes of the region) are ignored, and so
+    are pieces split off with under 1 % of the area (outlier clusters). Above BAND_POINTS
+    points the triangulation is restricted to a band around a coarse boundary (see
+    :func:`_band`); the returned loop is the same.
+    """
+    pts = _as_points(points2d, 2, "points2d")
+    if alpha is not None and not (np.isfinite(alpha) and alpha > 0):
+        raise InputError(f"alpha must be a positive number, got {alpha}")
+    grow = alpha is None if retry is None else retry
+    alpha0 = default_alpha(pts) if alpha is None else float(alpha)
+    rows = _band(pts, alpha0) if len(pts) > BAND_POINTS else np.arange(len(pts))
+    sub = pts[rows]
+    tri = _triangulate(sub)
+    radius = _circumradius(sub, tri)
+    problem = ""
+    for attempt in range(ALPHA_RETRIES + 1 if grow else 1):
+        a = alpha0 * ALPHA_GROWTH**attempt
+        loop, problem = _outer_loop(sub, tri[radius < a], HOLE_AREA * alpha0**2)
+        if loop is not None:
+            return rows[loop]
+    tried = f"alpha {alpha0:.4g} .. {a:.4g}" if grow else f"alpha {alpha0:.4g}"
+    raise InputError(
+        f"no single boundary loop with {tried}: {problem}. The region must be a height field "
+        "over its PCA plane, without overlaps; split a folded region, or pass a larger alpha"
+    )
+
+
+# --------------------------------------------------------------------------- corners
+def _turning(
+    loop: NDArray[np.float64], step: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Chords ``p[i] - p[i-step]`` and ``p[i+step] - p[i]`` of a closed loop, and the
+    chord ``p[i+step] - p[i-step]``."""
+    back = np.roll(loop, step, axis=0)
+    ahead = np.roll(loop, -step, axis=0)
+    return loop - back, ahead - loop, ahead - back
+
+
+def _turning_angle(loop: NDArray[np.float64], step: int) -> NDArray[np.float64]:
+    """Turning angle (degrees, 0..180) of a closed 2D loop at every point over +-step."""
+    ab, bc, _ = _turning(loop, step)
+    cross = ab[:, 0] * bc[:, 1] - ab[:, 1] * bc[:, 0]
+    return np.degrees(np.arctan2(np.abs(cross), np.einsum("ij,ij->i", ab, bc)))
+
+
+def corner_curvature(loop: ArrayLike, step: int) -> NDArray[np.float64]:
+    """Discrete curvature ``k = 4S / (abc)`` at every point of a closed loop (Fig. 5.2).
+
+    ``S`` is the area of the triangle ``(p[i-step], p[i], p[i+step])`` and ``a, b, c`` its side
+    lengths: ``k`` is the inverse radius of the circle through the three points.
+
+    Parameters
+    ----------
+    loop : (n, D) float
+        Closed implicitly.
+    step : int
+        Index offset of the two neighbours (>= 1): the scale the curvature is measured at.
+
+    Returns
+    -------
+    (n,) float
+        For D = 2 signed by the turning direction (positive = left turn, i.e. convex on a
+        counter-clockwise loop); unsigned otherwise. 0 where two of the points coincide.
+    """
+    pts = np.asarray(loop, dtype=float)
+    if pts.ndim != 2 or len(pts) < 3:
+        raise InputError(f"loop must have shape (n, D) with n >= 3, got {pts.shape}")
+    if not 1 <= step < len(pts):
+        raise InputError(f"step must be in 1..{len(pts) - 1}, got {step}")
+    ab, bc, ac = _turning(pts, int(step))
+    if pts.shape[1] == 2:
+        area2 = ab[:, 0] * bc[:, 1] - ab[:, 1] * bc[:, 0]
+    else:
+        # |ab x bc| from Lagrange's identity: works in any dimension.
+        dot = np.einsum("ij,ij->i", ab, bc)
+        square = np.einsum("ij,ij->i", ab, ab) * np.einsum("ij,ij->i", bc, bc) - dot**2
+        area2 = np.sqrt(np.maximum(square, 0.0))
+    lengths = np.linalg.norm(ab, axis=1) * np.linalg.norm(bc, axis=1) * np.linalg.norm(ac, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = 2.0 * area2 / lengths  # 4S / (abc) with S = area2 / 2
+    return np.where(lengths > 0, k, 0.0)
+
+
+def _resample(
+    loop: NDArray[np.float64], count: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``count`` points equally spaced by arc length around a closed loop (n, D).
+
+    Returns the points (count, D) and the arc position of every loop vertex (n,).
+    """
+    closed = np.vstack([loop, loop[:1]])
+    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    perimeter = arc[-1]
+    s = np.arange(count) * (perimeter / count)
+    out = np.stack([np.interp(s, arc, closed[:, d]) for d in range(loop.shape[1])], axis=1)
+    return out, arc[:-1]
+
+
+def _peaks(score: NDArray[np.float64], radius: int) -> NDArray[np.int64]:
+    """Indices of cyclic local maxima of ``score`` (> 0), at least ``radius`` apart, strongest
+    first (non-maximum suppression)."""
+    m = len(score)
+    window = min(2 * radius + 1, m if m % 2 else m - 1)
+    top = maximum_filter1d(score, size=window, mode="wrap")
+    local = np.flatnonzero((score > 0) & (score >= top))
+    local = local[np.argsort(-score[local], kind="stable")]
+    chosen: list[int] = []
+    # Greedy suppression over the local maxima only (a handful; plateaus give ties).
+    for i in local:
+        if all(min(abs(i - j), m - abs(i - j)) >= radius for j in chosen):
+            chosen.append(int(i))
+    return np.asarray(chosen, dtype=np.int64)
+
+
+def detect_region_corners(
+    loop2d: ArrayLike,
+    count: int | None = None,
+    min_spacing: float | None = None,
+    *,
+    angle: float = CORNER_ANGLE,
+) -> NDArray[np.int64]:
+    """Corners of a region's boundary loop: the points of highest curvature (Section 5.2.1).
+
+    The loop is resampled evenly by arc length and ``k = 4S/(abc)`` (:func:`corner_curvature`)
+    is measured over ``+-step`` with ``step`` ~ perimeter / 48 (at least 4 loop edges, so the
+    jitter of alpha-shape boundaries averages out). Peaks closer than ``min_spacing`` along the
+    loop are suppressed in favour of the stronger one. Each chosen peak is moved to the loop
+    vertex nearby that sticks out farthest (the sharp tip, not a point beside it).
+
+    Parameters
+    ----------
+    loop2d : (n, 2) float
+        The boundary loop (either orientation; convex means turning like the loop does).
+    count : {3, 4, None}
+        ``None``: the peaks that turn by at least ``angle`` degrees, over both ``+-step`` and
+        ``+-2 step``, are the corners (so 4 when the 4th peak is clearly a corner, 3 when it
+        is a smooth bend or noise); there must be 3 or 4 and all convex. ``3`` or ``4``: the ``count`` strongest convex peaks,
+        however weak (a forced choice: e.g. 4 of the 5 convex corners of an L-shape, whose
+        notch then lies inside a side).
+    min_spacing : float, optional
+        Least arc length between two corners; default perimeter / 16.
+    angle : float
+        Turning angle (degrees) from which a peak counts as a corner when ``count`` is None.
+
+    Returns
+    -------
+    (c,) int
+        Indices into ``loop2d``, increasing.
+
+    Raises
+    ------
+    InputError
+        With ``count=None`` if the number of clear corners is not 3 or 4, or a clear corner is
+        concave (a Coons patch cannot have a reflex corner); with a ``count`` if fewer convex
+        peaks exist.
+    """
+    loop = np.asarray(loop2d, dtype=float)
+    if loop.ndim != 2 or loop.shape[1] != 2 or len(loop) < 6:
+        raise InputError(f"loop2d must have shape (n, 2) with n >= 6, got {loop.shape}")
+    if not np.isfinite(loop).all():
+        raise InputError("loop2d contains NaN or inf; remove those points")
+    if count is not None and count not in (3, 4):
+        raise InputError(f"count must be 3, 4 or None, got {count}")
+    after = np.roll(loop, -1, axis=0)
+    edges = np.linalg.norm(after - loop, axis=1)
+    perimeter = float(edges.sum())
+    shoelace = float(np.sum(loop[:, 0] * after[:, 1] - after[:, 0] * loop[:, 1]))
+    if not perimeter > 0 or shoelace == 0:
+        raise InputError("the boundary loop encloses no area; pass the loop of a 2D region")
+    orientation = 1.0 if shoelace > 0 else -1.0
+    spacing = perimeter / CORNER_SPACING if min_spacing is None else float(min_spacing)
+    if not spacing > 0:
+        raise InputError(f"min_spacing must be > 0, got {min_spacing}")
+    m = int(np.clip(2 * len(loop), 512, 4096))
+    res, arc = _resample(loop, m)
+    delta = perimeter / m
+    step_len = min(max(perimeter / 48.0, 4.0 * float(np.median(edges))), 0.5 * spacing)
+    step = int(np.clip(round(step_len / delta), 1, m // 4))
+    k = orientation * corner_curvature(res, step)
+    # Turning angle at the curvature's scale and at twice it: a corner between straight
+    # sides turns as much at both, a smooth bend twice as much at 2 step, a noise wiggle
+    # much less. The smaller of the two measures how clearly a peak is a corner.
+    turn = np.minimum(_turning_angle(res, step), _turning_angle(res, min(2 * step, m // 4)))
+    radius = max(1, int(round(spacing / delta)))
+    convex = _peaks(np.where(k > 0, k, 0.0), radius)
+    if count is None:
+        concave = _peaks(np.where(k < 0, -k, 0.0), radius)
+        sharp = convex[turn[convex] >= angle]
+        reflex = concave[turn[concave] >= angle]
+        total = len(sharp) + len(reflex)
+        if total not in (3, 4) or len(reflex):
+            detail = f" ({len(reflex)} concave)" if len(reflex) else ""
+            hint = (
+                "pass count=4 (or 3) to keep the sharpest convex ones, corners= explicitly, or "
+                "split the region"
+                if total > 4 or len(reflex)
+                else "pass corners= explicitly (or count= to force the sharpest points)"
+            )
+            raise InputError(
+                f"the region's boundary has {total} corners{detail} turning by at least "
+                f"{angle:g} degrees; a patch needs 3 or 4 convex corners — {hint}"
+            )
+        picked = sharp
+    else:
+        if len(convex) < count:
+            raise InputError(
+                f"the region's boundary has only {len(convex)} convex curvature peaks at least "
+                f"{spacing:.4g} apart; {count} corners were asked for — pass corners= "
+                "explicitly or a smaller min_spacing"
+            )
+        picked = convex[:count]
+    return np.sort(_snap(loop, arc, res, picked, step, delta, orientation))
+
+
+def _snap(
+    loop: NDArray[np.float64],
+    arc: NDArray[np.float64],
+    res: NDArray[np.float64],
+    peaks: NDArray[np.int64],
+    step: int,
+    delta: float,
+    orientation: float,
+) -> NDArray[np.int64]:
+    """Loop vertex of each resampled peak: among the vertices within +-step/2 of it (arc
+    length), the one farthest outside the chord ``res[i-step] -> res[i+step]``."""
+    m = len(res)
+    perimeter = m * delta
+    out = np.empty(len(peaks), dtype=np.int64)
+    for j, i in enumerate(peaks):  # a loop over 3-4 corners
+        centre = i * delta
+        gap = np.abs((arc - centre + 0.5 * perimeter) % perimeter - 0.5 * perimeter)
+        near = np.flatnonzero(gap <= 0.5 * step * delta)
+        if not len(near):
+            out[j] = int(gap.argmin())
+            continue
+        a, c = res[(i - step) % m], res[(i + step) % m]
+        rel = loop[near] - a
+        outside = -orientation * ((c[0] - a[0]) * rel[:, 1] - (c[1] - a[1]) * rel[:, 0])
+        out[j] = int(near[outside.argmax()])
+    return out
+
+
+# --------------------------------------------------------------------------- sides
+def refine_corners(
+    loop: NDArray[np.float64], corners: NDArray[np.int64], reach: float, min_angle: float = 20.0
+) -> NDArray[np.float64]:
+    """Corner positions from the two sides that meet there, not from the nearest sample.
+
+    The data rarely holds a point at a corner's tip: the corner of an unordered cloud lies
+    about one sampling spacing beyond its nearest sample. Each side is fitted over the loop
+    points within arc length ``reach`` of the corner (the corner vertex left out) by a line
+    or, where that clearly fits better (a bent side with little noise: a line would be off by
+    the sagitta), a quadratic in the arc length. Its value and slope at the corner give the
+    side's tangent line there, and the corner is put midway between the closest points of the
+    two tangent lines (skew in 3D). The vertex is kept where the sides meet at under
+    ``min_angle`` degrees, where the estimate lands farther than ``reach / 2`` away or inside
+    the region (a tip hidden beyond the samples lies outside), or where it moves by less than
+    a tenth of the loop spacing (exact data with a sample at the tip: extrapolation would
+    only add its own error).
+
+    Parameters
+    ----------
+    loop : (n, D) float
+        Closed loop.
+    corners : (c,) int
+        Corner indices into ``loop``, increasing.
+    reach : float
+        Arc length of each side used for its tangent line.
+
+    Returns
+    -------
+    (c, D) float
+    """
+    seg = np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    perimeter = arc[-1]
+    least_move = 0.1 * float(np.median(seg))
+    out = loop[corners].astype(float)
+    for j, c in enumerate(corners):  # 3-4 corners
+        ahead = (arc[:-1] - arc[c]) % perimeter  # arc length from the corner, forwards
+        behind = (arc[c] - arc[:-1]) % perimeter
+        lines = [_tangent_at_zero(loop, dist, reach) for dist in (behind, ahead)]
+        if lines[0] is None or lines[1] is None:
+            continue
+        (p, d), (q, e) = lines
+        b = float(d @ e)
+        if abs(b) > np.cos(np.radians(min_angle)):
+            continue
+        # Closest points p + s d and q + t e of the two lines (unit d, e): the normal
+        # equations of min |w + s d - t e|^2 with w = p - q.
+        w = p - q
+        s = (b * float(e @ w) - float(d @ w)) / (1.0 - b * b)
+        t = float(e @ w) + b * s
+        estimate = 0.5 * (p + s * d + q + t * e)
+        shift = estimate - loop[c]
+        move = float(np.linalg.norm(shift))
+        # d and e point from the corner into the sides, so d + e points into the region: a
+        # tip hidden beyond the samples lies the other way.
+        outward = float(shift @ (d + e)) < 0.0
+        if outward and least_move <= move <= 0.5 * reach:
+            out[j] = estimate
+    return out
+
+
+def _tangent_at_zero(
+    loop: NDArray[np.float64], dist: NDArray[np.float64], reach: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Point and unit tangent at arc length 0 of the loop points with ``0 < dist <= reach``
+    (line fit, or quadratic if it halves the RMS residual); None with under 4 points."""
+    inside = (dist > 0) & (dist <= reach)
+    if inside.sum() < 4:
+        return None
+    x = dist[inside] / reach
+    y = loop[inside]
+    fits = []
+    for degree in (1, 2):
+        design = x[:, None] ** np.arange(degree + 1)[None, :]
+        coef = np.linalg.lstsq(design, y, rcond=None)[0]
+        fits.append((coef, float(np.sqrt(np.mean((design @ coef - y) ** 2)))))
+    (line, line_rms), (quad, quad_rms) = fits
+    coef = quad if quad_rms < 0.5 * line_rms else line
+    norm = float(np.linalg.norm(coef[1]))
+    return None if norm == 0.0 else (coef[0], coef[1] / norm)
+
+
+def _caller_corners(
+    corners: ArrayLike, points: NDArray[np.float64], loop_index: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Map caller corners (indices into ``points`` or coordinates) to loop indices.
+
+    Returns the loop indices in loop order starting with the caller's first corner, and the
+    corner positions (the caller's coordinates, or the indexed points).
+    """
+    given = np.asarray(corners)
+    if given.ndim == 1 and np.issubdtype(given.dtype, np.integer):
+        if given.min(initial=0) < 0 or given.max(initial=0) >= len(points):
+            raise InputError(
+                f"corner indices must lie in 0..{len(points) - 1}, got {given.tolist()}"
+            )
+        position = points[given]
+    elif given.ndim == 2 and given.shape[1] == 3:
+        position = given.astype(float)
+        if not np.isfinite(position).all():
+            raise InputError("corners contain NaN or inf")
+    else:
+        raise InputError(
+            f"corners must be (c,) int indices into points or (c, 3) coordinates, got an "
+            f"array of shape {given.shape} and dtype {given.dtype}"
+        )
+    if len(position) not in (3, 4):
+        raise InputError(f"{len(position)} corners were given; a patch needs 3 or 4")
+    loop = points[loop_index]
+    _, idx = cKDTree(loop).query(position)
+    idx = np.asarray(idx, dtype=np.int64)
+    if len(np.unique(idx)) != len(idx):
+        raise InputError(
+            "two of the given corners are nearest to the same boundary point; pass distinct "
+            "corners on the region's boundary"
+        )
+    n = len(loop)
+    # Loop order from the caller's first corner, in either direction.
+    ahead = (idx - idx[0]) % n
+    if np.all(np.diff(ahead) > 0):
+        order = np.arange(len(idx))
+    elif np.all(np.diff(ahead[np.r_[0, len(idx) - 1 : 0 : -1]]) > 0):
+        order = np.r_[0, len(idx) - 1 : 0 : -1]
+    else:
+        raise InputError(
+            "the given corners are not in order around the boundary (neither way round); "
+            "list them as they follow each other along the region's edge"
+        )
+    return idx[order], position[order]
+
+
+def _noise_tolerance(runs: list[NDArray[np.float64]], diagonal: float) -> float:
+    """NOISE_FACTOR x RMS distance of the side points to a smoothed copy of their side (each
+    smoothed on its own so corners do not blur), at least TOLERANCE_FLOOR x diagonal."""
+    residuals = []
+    for run in runs:
+        window = int(min(31, max(5, len(run) // 4)))
+        window -= 1 - window % 2
+        if len(run) < 7:
+            continue
+        smooth, _ = denoise(run, closed=False, pos_window=window)
+        residuals.append(np.linalg.norm(run - smooth, axis=1))
+    rms = float(np.sqrt(np.mean(np.concatenate(residuals) ** 2))) if residuals else 0.0
+    return max(NOISE_FACTOR * rms, TOLERANCE_FLOOR * diagonal)
+
+
+def extract_boundary(
+    points: ArrayLike,
+    *,
+    corners: ArrayLike | None = None,
+    count: int | None = None,
+    alpha: float | None = None,
+    tolerance: float | None = None,
+) -> RegionBoundary:
+    """Boundary loop, corners and fitted sides of one region of a point cloud (Sec. 5.2.1-2).
+
+    Parameters
+    ----------
+    points : (N, 3) float, N >= 10
+        The region's points, unordered. The region must be a height field over its PCA plane
+        (see the module docstring).
+    corners : (c,) int or (c, 3) float, optional
+        Corners chosen by the caller (c in {3, 4}): indices into ``points`` or coordinates.
+        Each is matched to the nearest boundary-loop point. The caller's first corner is
+        corner 0; the others keep their order if it runs counter-clockwise in the projection
+        and are reversed (after the first) if it runs clockwise, so sides always run
+        counter-clockwise. Given coordinates are used exactly as the side end points (so two
+        neighbouring regions given the same corner coordinates share identical corners).
+    count : {3, 4, None}
+        Number of corners to detect when ``corners`` is not given (see
+        :func:`detect_region_corners`). Detected corners are ordered from the one with the
+        smallest ``u + v`` and placed where their sides meet (:func:`refine_corners`).
+    alpha : float, optional
+        Alpha-shape radius (see :func:`boundary_loop`).
+    tolerance : float, optional
+        Side-fit tolerance. Default: 3 x the RMS distance of the boundary points to a
+        Savitzky-Golay smoothing of their side (the boundary's own noise, so sides follow the
+        shape but not the jitter), at least 1e-4 x the bounding-box diagonal.
+
+    Returns
+    -------
+    RegionBoundary
+
+    Raises
+    ------
+    InputError
+        Bad points (NaN, < 10, collinear), no simple boundary loop, not 3 or 4 corners.
+    FitError
+        Two corners are adjacent on the loop, leaving a side without interior points.
+    """
+    pts = _as_points(points, 3, "points")
+    if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"tolerance must be a positive number, got {tolerance}")
+    origin, axes = pca_frame(pts)
+    uv = (pts - origin) @ axes[:2].T
+    loop_index = boundary_loop(uv, alpha)
+    n = len(loop_index)
+    if corners is None:
+        cidx = detect_region_corners(uv[loop_index], count=count)
+        # Corner 0: the "bottom-left" corner, so sides come out bottom, right, top, left.
+        first = int(uv[loop_index[cidx]].sum(axis=1).argmin())
+        cidx = np.roll(cidx, -first)
+        loop2d = uv[loop_index]
+        perimeter = float(np.linalg.norm(np.roll(loop2d, -1, axis=0) - loop2d, axis=1).sum())
+        cpos = refine_corners(pts[loop_index], cidx, perimeter / REFINE_SPAN)
+    else:
+        cidx, cpos = _caller_corners(corners, pts, loop_index)
+        if count is not None and count != len(cidx):
+            raise InputError(
+                f"count={count} but {len(cidx)} corners were given; drop count or pass "
+                f"{count} corners"
+            )
+    # Start the loop at corner 0, so corner indices increase from 0.
+    loop_index = np.roll(loop_index, -int(cidx[0]))
+    cidx = (cidx - cidx[0]) % n
+    loop = pts[loop_index]
+    ends = np.r_[cidx, n]
+    if np.any(np.diff(ends) < 2):
+        raise FitError(
+            "two corners are neighbours on the boundary loop, leaving a side without points; "
+            "pass corners= that are farther apart"
+        )
+    closed = np.vstack([loop, loop[:1]])
+    runs = [closed[a : b + 1] for a, b in zip(ends[:-1], ends[1:])]
+    diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    tol = _noise_tolerance(runs, diagonal) if tolerance is None else float(tolerance)
+    c = len(cidx)
+    sides: list[PiecewiseBezier] = []
+    errors = np.empty(c)
+    for k, run in enumerate(runs):  # 3-4 sides, each fitted as a whole
+        start, end = cpos[k], cpos[(k + 1) % c]
+        smooth, tangent = denoise(run, closed=False)
+        chain = fit_chain(
+            run, tol, p_start=start, p_end=end, g1=True,
+            param_points=smooth, join_tangents=tangent, rounds=SIDE_ROUNDS,
+        )
+        ctrl = chain.curves.copy()
+        # The fitter honours p_start / p_end; assigning makes the shared corners bit-identical.
+        ctrl[0, 0], ctrl[-1, 3] = start, end
+        sides.append(PiecewiseBezier.from_chain(ctrl))
+        errors[k] = chain.max_error
+    return RegionBoundary(
+        loop=loop,
+        loop_index=loop_index.astype(np.int64),
+        corners=cidx.astype(np.int64),
+        sides=tuple(sides),
+        frame=(origin, axes),
+        side_errors=errors,
+        tolerance=tol,
+    )
