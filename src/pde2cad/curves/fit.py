@@ -185,51 +185,61 @@ def fit_with_parameters(
     ``weights`` (n,) weight each point's squared distance (used to push down the maximum).
     """
     sw = np.ones(len(points)) if weights is None else np.sqrt(weights)
-    a, b, c = _abc(t, p0, p3, points)
     base1, base2, lin1, lin2 = _constraint_basis(p0, p3, tan0, tan3)
-    jx = (a[:, None, None] * lin1 + b[:, None, None] * lin2) * sw[:, None, None]
-    rhs = -(a[:, None] * base1 + b[:, None] * base2 + c) * sw[:, None]
-    x = np.linalg.lstsq(jx.reshape(-1, jx.shape[2]), rhs.reshape(-1), rcond=None)[0]
+    # Design rows are sw_i (a_i lin1 + b_i lin2): every product below reduces to a few
+    # weighted sums of a, b and small (D, k) matrices, so each round costs a handful of
+    # vector operations whatever the dimension.
+    l11, l12, l22 = lin1.T @ lin1, lin1.T @ lin2 + lin2.T @ lin1, lin2.T @ lin2
 
-    def ctrl_of(x_: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.stack([p0, base1 + lin1 @ x_, base2 + lin2 @ x_, p3])
+    def state(t_: NDArray[np.float64], x_: NDArray[np.float64]):
+        s_ = 1.0 - t_
+        a_, b_ = 3.0 * t_ * s_ * s_, 3.0 * t_ * t_ * s_
+        p1_, p2_ = base1 + lin1 @ x_, base2 + lin2 @ x_
+        curve = np.outer(s_ * s_ * s_, p0) + np.outer(a_, p1_) + np.outer(b_, p2_) + np.outer(t_ * t_ * t_, p3)
+        return a_ * sw, b_ * sw, s_, p1_, p2_, (curve - points) * sw[:, None]
 
-    ctrl = ctrl_of(x)
-    resid = (bezier.evaluate(ctrl, t) - points) * sw[:, None]
+    s0 = 1.0 - t
+    a0, b0 = 3.0 * t * s0 * s0 * sw, 3.0 * t * t * s0 * sw
+    c0 = (np.outer(s0**3, p0) + np.outer(t**3, p3) - points) * sw[:, None] + np.outer(a0, base1) + np.outer(b0, base2)
+    h0 = (a0 @ a0) * l11 + (a0 @ b0) * l12 + (b0 @ b0) * l22
+    rhs0 = -(lin1.T @ (a0 @ c0) + lin2.T @ (b0 @ c0))
+    x = np.linalg.lstsq(h0, rhs0, rcond=None)[0] if h0.size else np.zeros(0)
+    aw, bw, s, p1, p2, resid = state(t, x)
     cost = float(np.sum(resid * resid))
     lam = 1e-3
     k = len(x)
-    for _ in range(rounds):
-        a, b, _c = _abc(t, p0, p3, points)
-        jx = (a[:, None, None] * lin1 + b[:, None, None] * lin2) * sw[:, None, None]  # (n, D, k)
-        jt = bezier.derivative(ctrl, t, 1) * sw[:, None]  # (n, D)
+    for _ in range(rounds if k else 0):
+        jt = (3.0 * np.outer(s * s, p1 - p0) + 6.0 * np.outer(t * s, p2 - p1) + 3.0 * np.outer(t * t, p3 - p2)) * sw[:, None]
         ct = np.sum(jt * jt, axis=1)
-        g = np.einsum("ndk,nd->nk", jx, jt)
+        g = (aw[:, None] * jt) @ lin1 + (bw[:, None] * jt) @ lin2  # (n, k)
         jtr = np.sum(jt * resid, axis=1)
-        h0 = np.einsum("ndk,ndl->kl", jx, jx)
-        r0 = np.einsum("ndk,nd->k", jx, resid)
+        h0 = (aw @ aw) * l11 + (aw @ bw) * l12 + (bw @ bw) * l22
+        r0 = lin1.T @ (aw @ resid) + lin2.T @ (bw @ resid)
+        diag = np.diag(np.diag(h0) + 1e-12)
         improved = False
         for _try in range(4):
             cd = ct * (1.0 + lam) + 1e-12
-            h = h0 - np.einsum("nk,nl->kl", g / cd[:, None], g) + lam * np.diag(np.diag(h0) + 1e-12)
-            rhs = -(r0 - g.T @ (jtr / cd))
+            gs = g / cd[:, None]
+            h = h0 - g.T @ gs + lam * diag
+            rhs = -(r0 - gs.T @ jtr)
             try:
                 dx = np.linalg.solve(h, rhs)
             except np.linalg.LinAlgError:
                 dx = np.linalg.lstsq(h, rhs, rcond=None)[0]
             t_new = np.clip(t - (jtr + g @ dx) / cd, 0.0, 1.0)
             x_new = x + dx
-            ctrl_new = ctrl_of(x_new)
-            resid_new = (bezier.evaluate(ctrl_new, t_new) - points) * sw[:, None]
-            cost_new = float(np.sum(resid_new * resid_new))
+            new_state = state(t_new, x_new)
+            cost_new = float(np.sum(new_state[-1] * new_state[-1]))
             if cost_new < cost:
-                x, t, ctrl, resid, cost = x_new, t_new, ctrl_new, resid_new, cost_new
+                x, t, cost = x_new, t_new, cost_new
+                aw, bw, s, p1, p2, resid = new_state
                 lam = max(lam / 3.0, 1e-7)
                 improved = True
                 break
             lam *= 10.0
-        if not improved or k == 0:
+        if not improved:
             break
+    ctrl = np.stack([p0, base1 + lin1 @ x, base2 + lin2 @ x, p3])
     a, b, c = _abc(t, p0, p3, points)
     ctrl = _clamped(ctrl, a, b, c, tan0, tan3)
     t = reparameterize(ctrl, points, t)
