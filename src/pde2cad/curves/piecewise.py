@@ -27,6 +27,8 @@ MIN_POINTS = 4
 # The test runs on the points (pixel vertices); samples of the boundary between them can sit a
 # hair farther from the curve, so the test keeps a 2 % margin under the user's tolerance.
 SAFETY = 0.98
+# Closed loops of at most this many points (pixel perimeter) may close with one cubic.
+TINY_LOOP = 40
 # Fits whose maximum error is at most this factor over the tolerance get a minimax
 # refinement (reweighted least squares) before they are rejected.
 MINIMAX_RANGE = 1.4
@@ -402,6 +404,13 @@ def fit_closed(
         offset = int(_max_curvature_index(pos)) if start is None else int(start) % n
         ring = np.r_[offset:n, 0 : offset + 1]
         chain = None
+        if n <= TINY_LOOP:
+            # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
+            # and at this size the join cannot be seen.
+            one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method, max_pieces=1)
+            if one.ok and len(one.fits) == 1:
+                one.corners = [0]
+                return one, offset
         if g1:
             # Open the loop on its denoised curve with the loop's own tangent there, so the
             # closing join is G1 like every other.
