@@ -79,3 +79,30 @@ def test_version_and_help():
     assert proc.returncode == 0 and proc.stdout.startswith("pde2cad ")
     proc = subprocess.run([sys.executable, "-m", "pde2cad.cli", "--help"], capture_output=True, text=True)
     assert "vectorize" in proc.stdout
+
+
+def test_arcs_dxf_stays_within_the_tolerance_of_the_pixel_boundary(ring_png, tmp_path):
+    from pde2cad.image.evaluate import boundary_samples
+    from pde2cad.image.raster import read_image
+
+    dxf = tmp_path / "r.dxf"
+    assert main(["vectorize", str(ring_png), "-o", str(dxf), "--dxf-curves", "arcs"]) == 0
+    doc = ezdxf.readfile(dxf)
+    assert doc.audit().has_errors is False
+    height = read_image(ring_png).shape[0]
+    pts = []
+    for pl in doc.modelspace().query("LWPOLYLINE"):
+        for v in pl.virtual_entities():
+            if v.dxftype() == "ARC":
+                pts.extend((p.x, height - p.y) for p in v.flattening(0.001))
+            else:
+                pts.extend([(v.dxf.start.x, height - v.dxf.start.y), (v.dxf.end.x, height - v.dxf.end.y)])
+    pts = np.asarray(pts)
+    # Lines are only their ends here: densify so nearest-point distances are exact to 0.05.
+    boundary = boundary_samples(read_image(ring_png), step=0.1)
+    from scipy.spatial import cKDTree
+
+    d_boundary_to_arcs = cKDTree(pts).query(boundary)[0].max()
+    d_arcs_to_boundary = cKDTree(boundary).query(pts)[0].max()
+    assert d_boundary_to_arcs <= 1.0 + 0.01  # flattening at 1e-3, sample spacing 0.1
+    assert d_arcs_to_boundary <= 1.0 + 0.06

@@ -69,9 +69,13 @@ def _run_vectorize(args: argparse.Namespace) -> int:
     for out in outputs:
         if out.suffix.lower() not in (".svg", ".dxf"):
             raise InputError(f"output {out} must end in .svg or .dxf")
+    approximate = args.dxf_curves != "spline" and any(o.suffix.lower() == ".dxf" for o in outputs)
+    # Arcs and polylines approximate the Béziers within 10 % of the fit tolerance (the DXF
+    # writer's default): fitting to 90 % keeps the written file within the user's tolerance.
+    fit_tolerance = args.tolerance * (0.9 if approximate else 1.0)
     drawing = vectorize(
         args.image,
-        tolerance=args.tolerance,
+        tolerance=fit_tolerance,
         threshold=args.threshold,
         invert=args.invert,
         symmetry=not args.no_symmetry,
@@ -93,7 +97,7 @@ def _run_vectorize(args: argparse.Namespace) -> int:
     print(
         f"vectorize: {len(drawing.shapes())} shapes, {len(drawing.loops)} loops, "
         f"{drawing.n_curves} curves, max error {drawing.max_error:.3f} px "
-        f"(tolerance {drawing.tolerance:g}), {symmetric} symmetric loops, "
+        f"(tolerance {args.tolerance:g}), {symmetric} symmetric loops, "
         f"{drawing.time_s:.2f} s -> {', '.join(map(str, outputs))}"
     )
     return EXIT_OK
