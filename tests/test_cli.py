@@ -96,9 +96,10 @@ def test_arcs_dxf_stays_within_the_tolerance_of_the_pixel_boundary(ring_png, tmp
             if v.dxftype() == "ARC":
                 pts.extend((p.x, height - p.y) for p in v.flattening(0.001))
             else:
-                pts.extend([(v.dxf.start.x, height - v.dxf.start.y), (v.dxf.end.x, height - v.dxf.end.y)])
+                for f in np.linspace(0.0, 1.0, 64):
+                    p = v.dxf.start + (v.dxf.end - v.dxf.start) * f
+                    pts.append((p.x, height - p.y))
     pts = np.asarray(pts)
-    # Lines are only their ends here: densify so nearest-point distances are exact to 0.05.
     boundary = boundary_samples(read_image(ring_png), step=0.1)
     from scipy.spatial import cKDTree
 
