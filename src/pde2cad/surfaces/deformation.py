@@ -14,36 +14,60 @@ The C1 deformation (Eq. 5.21) uses ``sin^2(m pi u) sin^2(n pi v)``: it vanishes 
 together with its first derivatives (and ``w_uv``), so the sides, cross-boundary derivatives
 and corner twists of a bicubic Coons patch are all kept.
 
+But every ``sin^2(m pi t)`` is symmetric about ``t = 1/2`` (``sin^2(m pi (1 - t)) =
+sin^2(m pi t)``), so Eq. 5.21 can only produce deformations that are mirror-symmetric in u and
+in v: whatever M and N, it cannot fit a residual that differs between the two halves of the
+patch. ``kind="c1full"`` replaces the factors by ``sin(pi t) sin(m pi t)``, which vanish with
+their first derivative at t = 0 and 1 just the same, are complete (``sin(pi t)`` times the
+sine series of Eq. 5.17) and contain Eq. 5.21: ``sin^2(m pi t) = sum_{j=1..m} sin(pi t)
+sin((2j - 1) pi t)``. ``"c1"`` stays the thesis's literal Eq. 5.21.
+
 Each coefficient is a D-vector (x, y, z); the three coordinates share one design matrix.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.linalg import cho_factor, cho_solve
 
 from pde2cad.errors import FitError, InputError
 
-Kind = Literal["c0", "c1"]
+Kind = Literal["c0", "c1", "c1full"]
+#: The deformation bases: Eq. 5.17, Eq. 5.21, and the complete C1 basis (module docstring).
+KINDS = ("c0", "c1", "c1full")
+
+_T = TypeVar("_T")
 
 #: Relative Tikhonov weight used automatically when the fit is close to under-determined.
 AUTO_RIDGE = 1e-6
-# Rows of the design matrix per QR chunk, scaled by the number of unknowns (memory bound).
-_CHUNK_ENTRIES = 4_000_000
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in KINDS:
+        raise InputError(
+            f"kind must be 'c0' (Eq. 5.17), 'c1' (Eq. 5.21) or 'c1full' (complete C1 basis), "
+            f"got {kind!r}"
+        )
 
 
 def sine_basis(t: ArrayLike, count: int, kind: Kind, order: int = 0) -> NDArray[np.float64]:
-    """The 1-D factors of Eq. 5.17 (``kind="c0"``) or Eq. 5.21 (``"c1"``) and derivatives.
+    """The 1-D factors of Eq. 5.17 (``kind="c0"``), Eq. 5.21 (``"c1"``) or the complete C1
+    basis (``"c1full"``, module docstring) and their derivatives.
 
     Parameters
     ----------
     t : array_like, any shape
     count : int
         Number of terms (M or N).
-    kind : {"c0", "c1"}
+    kind : {"c0", "c1", "c1full"}
     order : {0, 1, 2}
         Derivative order in ``t``.
 
@@ -51,8 +75,9 @@ def sine_basis(t: ArrayLike, count: int, kind: Kind, order: int = 0) -> NDArray[
     -------
     (*t.shape, count) float
         ``c0``: ``sin(k pi t)``, ``k pi cos(k pi t)``, ``-(k pi)^2 sin(k pi t)``;
-        ``c1``: ``sin^2(k pi t)``, ``k pi sin(2 k pi t)``, ``2 (k pi)^2 cos(2 k pi t)``,
-        for k = 1..count.
+        ``c1``: ``sin^2(k pi t)``, ``k pi sin(2 k pi t)``, ``2 (k pi)^2 cos(2 k pi t)``;
+        ``c1full``: ``sin(pi t) sin(k pi t) = (cos((k-1) pi t) - cos((k+1) pi t)) / 2`` and
+        its derivatives; for k = 1..count.
     """
     t = np.asarray(t, dtype=float)
     freq = np.pi * np.arange(1, count + 1)
@@ -73,8 +98,17 @@ def sine_basis(t: ArrayLike, count: int, kind: Kind, order: int = 0) -> NDArray[
             return freq * np.sin(angle)
         if order == 2:
             return 2.0 * freq**2 * np.cos(angle)
+    elif kind == "c1full":
+        lo, hi = freq - np.pi, freq + np.pi  # (k - 1) pi and (k + 1) pi
+        a_lo, a_hi = t[..., None] * lo, t[..., None] * hi
+        if order == 0:
+            return 0.5 * (np.cos(a_lo) - np.cos(a_hi))
+        if order == 1:
+            return 0.5 * (hi * np.sin(a_hi) - lo * np.sin(a_lo))
+        if order == 2:
+            return 0.5 * (hi**2 * np.cos(a_hi) - lo**2 * np.cos(a_lo))
     else:
-        raise InputError(f"kind must be 'c0' (Eq. 5.17) or 'c1' (Eq. 5.21), got {kind!r}")
+        _check_kind(kind)
     raise InputError(f"derivative order must be 0, 1 or 2, got {order}")
 
 
@@ -85,6 +119,19 @@ def _basis_jet(t: NDArray[np.float64], count: int, kind: Kind) -> list[NDArray[n
     ``sin((k+1)a) = 2 cos(a) sin(ka) - sin((k-1)a)`` (likewise for cos) gives the multiples:
     ``count`` times fewer transcendental calls than evaluating each term directly.
     """
+    if kind == "c1full":
+        # Multiples 0..count+1 of pi t; term k combines multiples k - 1 and k + 1.
+        mult = np.arange(count + 2)[:, None] * np.pi
+        cos_all = _cos_multiples(np.pi * t, count + 1)
+        sin_all = np.vstack(
+            [np.zeros((1, t.size)), _sin_multiples(np.pi * t, cos_all[1], count + 1)]
+        )
+        lo, hi = slice(0, count), slice(2, count + 2)
+        return [
+            0.5 * (cos_all[lo] - cos_all[hi]),
+            0.5 * (mult[hi] * sin_all[hi] - mult[lo] * sin_all[lo]),
+            0.5 * (mult[hi] ** 2 * cos_all[hi] - mult[lo] ** 2 * cos_all[lo]),
+        ]
     angle = (np.pi if kind == "c0" else 2.0 * np.pi) * t
     sin, cos = np.empty((count, t.size)), np.empty((count, t.size))
     sin[0], cos[0] = np.sin(angle), np.cos(angle)
@@ -109,11 +156,12 @@ class Deformation:
     ----------
     coefficients : (M, N, D) float
         Amplitudes ``a_mn`` (``coefficients[m-1, n-1]``), so ``w = sum a_mn f_m(u) f_n(v)``.
-    kind : {"c0", "c1"}
+    kind : {"c0", "c1", "c1full"}
     ridge : float
         Relative Tikhonov weight used by the fit (0 when none).
-    mean_error, max_error : float
-        Eq. 5.22 on the fitted residuals, ``|r_i - w(u_i, v_i)|`` (NaN if not from a fit).
+    mean_error, max_error, rms_error : float
+        Eq. 5.22 on the fitted residuals, ``|r_i - w(u_i, v_i)|``, and their root mean
+        square (NaN if not from a fit).
     """
 
     coefficients: NDArray[np.float64]
@@ -121,13 +169,13 @@ class Deformation:
     ridge: float = 0.0
     mean_error: float = field(default=float("nan"))
     max_error: float = field(default=float("nan"))
+    rms_error: float = field(default=float("nan"))
 
     def __post_init__(self) -> None:
         c = np.array(self.coefficients, dtype=float)
         if c.ndim != 3:
             raise InputError(f"coefficients must have shape (M, N, D), got {c.shape}")
-        if self.kind not in ("c0", "c1"):
-            raise InputError(f"kind must be 'c0' or 'c1', got {self.kind!r}")
+        _check_kind(self.kind)
         c.setflags(write=False)
         object.__setattr__(self, "coefficients", c)
 
@@ -274,13 +322,277 @@ def _check_fit_input(
     return r, p
 
 
-def _design(
-    u: NDArray[np.float64], v: NDArray[np.float64], m: int, n: int, kind: Kind
+#: Points per chunk of the fit: bounds the temporaries (about 90 rows of this length for
+#: M = N = 10) while each BLAS product stays large enough to run at full speed.
+_CHUNK = 65_536
+
+
+@contextmanager
+def _single_threaded_blas() -> Iterator[None]:
+    """Hold BLAS to one thread for the thin products of the fit.
+
+    Products such as (21, 65536) @ (65536, 21) have a tiny output and one long inner
+    dimension. A threaded OpenBLAS splits them at barriers that cost more than the arithmetic:
+    on a loaded 2-core machine they ran 30-100x slower than on one thread. threadpoolctl is
+    optional (FreeCAD's Python lacks it); without it BLAS keeps its own setting.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - depends on the environment
+        yield
+        return
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def _cos_multiples(angle: NDArray[np.float64], count: int) -> NDArray[np.float64]:
+    """``cos(j a)`` for j = 0..count at the angles ``a`` (n,): shape (count + 1, n).
+
+    Chebyshev recurrence ``cos((j+1)a) = 2 cos(a) cos(ja) - cos((j-1)a)``: one cosine per
+    point instead of one per term.
+    """
+    out = np.empty((count + 1, angle.size))
+    out[0] = 1.0
+    if count >= 1:
+        np.cos(angle, out=out[1])
+    twice = 2.0 * out[min(count, 1)]
+    for j in range(2, count + 1):
+        np.multiply(twice, out[j - 1], out=out[j])
+        out[j] -= out[j - 2]
+    return out
+
+
+def _sin_multiples(
+    angle: NDArray[np.float64], cos1: NDArray[np.float64], count: int
 ) -> NDArray[np.float64]:
-    """Separable design matrix ``A[i, m*N + n] = f_m(u_i) f_n(v_i)``: shape (len(u), M N)."""
-    fu = sine_basis(u, m, kind)
-    fv = sine_basis(v, n, kind)
-    return (fu[:, :, None] * fv[:, None, :]).reshape(u.size, m * n)
+    """``sin(j a)`` for j = 1..count, shape (count, n), given ``cos1 = cos(a)``:
+    ``sin((j+1)a) = 2 cos(a) sin(ja) - sin((j-1)a)``, seeded by one sine per point."""
+    out = np.empty((count, angle.size))
+    np.sin(angle, out=out[0])
+    twice = 2.0 * cos1
+    if count > 1:
+        np.multiply(twice, out[0], out=out[1])
+    for j in range(2, count):
+        np.multiply(twice, out[j - 1], out=out[j])
+        out[j] -= out[j - 2]
+    return out
+
+
+def _top_frequency(count: int, kind: Kind) -> int:
+    """Highest multiple of ``theta`` in the products ``f_a f_b`` (see :func:`_product_weights`)."""
+    return 2 * count + 2 if kind == "c1full" else 2 * count
+
+
+def _chunk_basis(
+    t: NDArray[np.float64], count: int, kind: Kind, moments: int = 0
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The 1-D factors ``f_k(t)``, k = 1..count, and the cosines ``cos(j theta)``,
+    j = 0..moments, that their products expand into.
+
+    ``theta = 2 pi t`` for ``c1`` and ``pi t`` otherwise (see :func:`_product_weights`).
+
+    Returns
+    -------
+    basis : (count, n) float
+    cosines : (at least moments + 1, n) float
+    """
+    if kind == "c0":
+        angle = np.pi * t
+        cosines = _cos_multiples(angle, max(moments, 1))
+        return _sin_multiples(angle, cosines[1], count), cosines
+    if kind == "c1":
+        # sin^2(k pi t) = (1 - cos(k theta)) / 2 with theta = 2 pi t.
+        cosines = _cos_multiples(2.0 * np.pi * t, max(moments, count))
+        return 0.5 * (1.0 - cosines[1 : count + 1]), cosines
+    # sin(pi t) sin(k pi t) = (cos((k - 1) theta) - cos((k + 1) theta)) / 2, theta = pi t.
+    cosines = _cos_multiples(np.pi * t, max(moments, count + 1))
+    return 0.5 * (cosines[:count] - cosines[2 : count + 2]), cosines
+
+
+def _product_weights(count: int, kind: Kind) -> NDArray[np.float64]:
+    """Weights ``T`` with ``f_a f_b = sum_j T[a, b, j] cos(j theta)``, shape
+    (count, count, top + 1) with ``top`` from :func:`_top_frequency`.
+
+    ``c0``: ``sin(a x) sin(b x) = (cos((a-b) x) - cos((a+b) x)) / 2`` with ``theta = x = pi t``.
+    ``c1``: ``sin^2(a x) sin^2(b x) = 1/4 - cos(a theta)/4 - cos(b theta)/4
+    + cos((a-b) theta)/8 + cos((a+b) theta)/8`` with ``theta = 2 x``.
+    ``c1full``: ``f_a = (cos(a_- theta) - cos(a_+ theta)) / 2`` with ``a_-+ = a -+ 1`` and
+    ``theta = pi t``; expand the product with ``cos x cos y = (cos(x-y) + cos(x+y)) / 2``.
+    So the Gram matrix of the separable basis needs only the 2-D cosine moments of the
+    parameters (see :func:`_accumulate`), not the (points, M N) design matrix.
+    """
+    k = np.arange(1, count + 1)
+    a, b = np.meshgrid(k, k, indexing="ij")
+    ia, ib = a - 1, b - 1
+    weights = np.zeros((count, count, _top_frequency(count, kind) + 1))
+    # Each assignment hits every (a, b) once, so += through fancy indexing is safe.
+    if kind == "c0":
+        weights[ia, ib, np.abs(a - b)] += 0.5
+        weights[ia, ib, a + b] -= 0.5
+    elif kind == "c1":
+        weights[..., 0] += 0.25
+        weights[ia, ib, a] -= 0.25
+        weights[ia, ib, b] -= 0.25
+        weights[ia, ib, np.abs(a - b)] += 0.125
+        weights[ia, ib, a + b] += 0.125
+    else:
+        for da, sa in ((-1, 1.0), (1, -1.0)):
+            for db, sb in ((-1, 1.0), (1, -1.0)):
+                x, y = a + da, b + db
+                weights[ia, ib, np.abs(x - y)] += 0.125 * sa * sb
+                weights[ia, ib, x + y] += 0.125 * sa * sb
+    return weights
+
+
+def _project_residuals(
+    fu: NDArray[np.float64], fv: NDArray[np.float64], rt: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``A^T r`` for one chunk: ``sum_i f_m(u_i) f_n(v_i) r_i``, shape (M, N, D), from the
+    factors ``fu`` (M, c), ``fv`` (N, c) and the residuals coordinate-major, ``rt`` (D, c)."""
+    m, n, dim = fu.shape[0], fv.shape[0], rt.shape[0]
+    weighted = (fv[:, None, :] * rt[None, :, :]).reshape(n * dim, -1)  # (N D, c)
+    return (fu @ weighted.T).reshape(m, n, dim)
+
+
+@dataclass(frozen=True, eq=False)
+class _NormalData:
+    """The normal equations (Eq. 5.19) for every ``M <= M_max`` and ``N <= N_max`` at once.
+
+    Attributes
+    ----------
+    kind : {"c0", "c1", "c1full"}
+    moments : (top(M_max) + 1, top(N_max) + 1) float
+        ``sum_i cos(k theta(u_i)) cos(l theta(v_i))``, ``top`` from :func:`_top_frequency`.
+    rhs : (M_max, N_max, D) float
+        ``sum_i f_m(u_i) f_n(v_i) r_i``.
+    """
+
+    kind: Kind
+    moments: NDArray[np.float64]
+    rhs: NDArray[np.float64]
+
+    def system(self, m: int, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Gram matrix (M N, M N) and right-hand side (M N, D), column ``m * N + n``."""
+        wu = _product_weights(m, self.kind)
+        wv = _product_weights(n, self.kind)
+        tu, tv = _top_frequency(m, self.kind), _top_frequency(n, self.kind)
+        half = np.einsum("aAk,kl->aAl", wu, self.moments[: tu + 1, : tv + 1])
+        gram = np.einsum("aAl,bBl->abAB", half, wv).reshape(m * n, m * n)
+        return 0.5 * (gram + gram.T), self.rhs[:m, :n].reshape(m * n, -1)
+
+
+def _chunk_map(fn: Callable[[slice], _T], n_pts: int) -> list[_T]:
+    """``fn`` on every chunk of ``range(n_pts)``, on one thread per core.
+
+    numpy releases the GIL in its array loops and BLAS runs single-threaded here (see
+    :func:`_single_threaded_blas`), so chunks proceed in parallel; results keep chunk order.
+    """
+    chunks = [slice(i, min(i + _CHUNK, n_pts)) for i in range(0, n_pts, _CHUNK)]
+    threads = min(len(chunks), os.cpu_count() or 1)
+    if threads <= 1:
+        return [fn(part) for part in chunks]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(fn, chunks))
+
+
+def _accumulate(
+    r: NDArray[np.float64], p: NDArray[np.float64], m: int, n: int, kind: Kind
+) -> _NormalData:
+    """One pass over the points: cosine moments and ``A^T r`` (call under
+    :func:`_single_threaded_blas`).
+
+    The Gram matrix ``A^T A`` of the (points, M N) design would cost ``(M N)^2`` per point;
+    the moments cost ``(2M + 1)(2N + 1)``, a 20x saving at M = N = 10, and ``A`` is never
+    formed: ``A^T r`` comes from the separable factors.
+    """
+    tu, tv = _top_frequency(m, kind), _top_frequency(n, kind)
+    # Coordinate-major copies: every later operation then runs along contiguous rows.
+    rt, pt = np.ascontiguousarray(r.T), np.ascontiguousarray(p.T)
+
+    def chunk(part: slice) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        fu, cu = _chunk_basis(pt[0, part], m, kind, tu)
+        fv, cv = _chunk_basis(pt[1, part], n, kind, tv)
+        return cu[: tu + 1] @ cv[: tv + 1].T, _project_residuals(fu, fv, rt[:, part])
+
+    parts = _chunk_map(chunk, r.shape[0])
+    moments = np.sum([a for a, _ in parts], axis=0)
+    rhs = np.sum([b for _, b in parts], axis=0)
+    return _NormalData(kind=kind, moments=moments, rhs=rhs)
+
+
+def _residual_pass(
+    r: NDArray[np.float64],
+    p: NDArray[np.float64],
+    coef: NDArray[np.float64],
+    kind: Kind,
+    normal: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """``|r_i - w(u_i, v_i)|`` (n_pts,) for coefficients ``coef`` (M, N, D) and, with
+    ``normal``, ``A^T (r - A a)`` (M, N, D) for iterative refinement."""
+    m, n, dim = coef.shape
+    norms = np.empty(r.shape[0])
+    flat = coef.reshape(m, n * dim).T  # (N D, M)
+    rt, pt = np.ascontiguousarray(r.T), np.ascontiguousarray(p.T)
+
+    def chunk(part: slice) -> NDArray[np.float64] | None:
+        fu, _ = _chunk_basis(pt[0, part], m, kind)
+        fv, _ = _chunk_basis(pt[1, part], n, kind)
+        inner = (flat @ fu).reshape(n, dim, -1)  # sum_m a_mn f_m(u_i)
+        left = rt[:, part] - np.einsum("nc,ndc->dc", fv, inner)
+        norms[part] = np.sqrt(np.einsum("dc,dc->c", left, left))  # disjoint slices
+        return _project_residuals(fu, fv, left) if normal else None
+
+    parts = _chunk_map(chunk, r.shape[0])
+    back = np.sum(parts, axis=0) if normal else None
+    return norms, back
+
+
+def _solve(
+    r: NDArray[np.float64],
+    p: NDArray[np.float64],
+    data: _NormalData,
+    m: int,
+    n: int,
+    ridge: float | None,
+) -> Deformation:
+    """Solve the normal equations for ``M = m, N = n`` from ``data`` (call under
+    :func:`_single_threaded_blas`); see :func:`fit_deformation` for ``ridge``."""
+    n_pts, dim = r.shape
+    unknowns = m * n
+    gram, rhs = data.system(m, n)
+    eig = np.linalg.eigvalsh(gram)
+    scale = float(np.trace(gram)) / unknowns
+    # eig ratio 1e-12 is a singular-value ratio of 1e-6 for the design itself.
+    near_singular = bool(eig[0] <= 1e-12 * eig[-1])
+    if ridge is None:
+        ridge = AUTO_RIDGE if (n_pts < 2 * unknowns or near_singular) else 0.0
+    system = gram + ridge * scale * np.eye(unknowns)
+
+    def solve(b: NDArray[np.float64]) -> NDArray[np.float64]:
+        if ridge == 0.0 and near_singular:
+            # Only reachable with ridge=0 forced: the minimum-norm answer, not Cholesky noise.
+            return np.linalg.lstsq(system, b, rcond=None)[0]
+        try:
+            return cho_solve(cho_factor(system, check_finite=False), b, check_finite=False)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(system, b, rcond=None)[0]
+
+    coef = solve(rhs)
+    if eig[0] < 1e-6 * eig[-1]:
+        # cond(A) > 1e3: the normal equations square it and lose digits, so refine once.
+        _, back = _residual_pass(r, p, coef.reshape(m, n, dim), data.kind, normal=True)
+        assert back is not None
+        coef = coef + solve(back.reshape(unknowns, dim) - ridge * scale * coef)
+    coefficients = coef.reshape(m, n, dim)
+    err, _ = _residual_pass(r, p, coefficients, data.kind)
+    return Deformation(
+        coefficients=coefficients,
+        kind=data.kind,
+        ridge=float(ridge),
+        mean_error=float(err.mean()),
+        max_error=float(err.max()),
+        rms_error=float(np.sqrt(np.mean(err * err))),
+    )
 
 
 def fit_deformation(
@@ -293,9 +605,13 @@ def fit_deformation(
 ) -> Deformation:
     """Least-squares fit of a deformation to the base-patch residuals (Eqs. 5.18, 5.19).
 
-    Minimizes ``sum_i |r_i - w(u_i, v_i)|^2 + lam sum_mn |a_mn|^2`` with the separable
-    design ``f_m(u_i) f_n(v_i)``, accumulated chunk by chunk into the (M N, M N) normal
-    equations (a million points need no million-by-MN matrix), refined when ill conditioned.
+    Minimizes ``sum_i |r_i - w(u_i, v_i)|^2 + lam sum_mn |a_mn|^2`` over the amplitudes.
+    The (M N, M N) normal equations are assembled from 2-D cosine moments of the
+    parameters (products of sines are sums of cosines, :func:`_product_weights`), chunk by
+    chunk, so a million points need neither a million-by-MN matrix nor ``(M N)^2`` work per
+    point; they are solved by Cholesky and refined once when ill conditioned. The sine basis
+    is close to orthogonal on spread-out parameters, so squaring its condition number is
+    harmless in the usual case.
 
     Parameters
     ----------
@@ -305,8 +621,8 @@ def fit_deformation(
         ``(u_i, v_i)`` in [0, 1]^2.
     m, n : int
         Numbers of terms M, N (Eq. 5.17).
-    kind : {"c0", "c1"}
-        Eq. 5.17 or Eq. 5.21.
+    kind : {"c0", "c1", "c1full"}
+        Eq. 5.17, Eq. 5.21, or the complete C1 basis (module docstring).
     ridge : float, optional
         Relative Tikhonov weight: ``lam = ridge * trace(A^T A) / (M N)``. ``None`` (default)
         uses none when the data determine every term, and ``AUTO_RIDGE`` when they nearly do
@@ -327,10 +643,9 @@ def fit_deformation(
     r, p = _check_fit_input(residuals, params)
     if int(m) != m or int(n) != n or m < 1 or n < 1:
         raise InputError(f"M and N must be positive integers, got M={m}, N={n}")
-    if kind not in ("c0", "c1"):
-        raise InputError(f"kind must be 'c0' (Eq. 5.17) or 'c1' (Eq. 5.21), got {kind!r}")
+    _check_kind(kind)
     m, n = int(m), int(n)
-    n_pts, dim = r.shape
+    n_pts = r.shape[0]
     unknowns = m * n
     if ridge is None and n_pts < unknowns:
         raise FitError(
@@ -339,52 +654,8 @@ def fit_deformation(
         )
     if ridge is not None and ridge < 0:
         raise InputError(f"ridge must be >= 0, got {ridge}")
-
-    rows = max(1, _CHUNK_ENTRIES // unknowns)
-    chunks = [slice(i, min(i + rows, n_pts)) for i in range(0, n_pts, rows)]
-
-    def design(part: slice) -> NDArray[np.float64]:
-        return _design(p[part, 0], p[part, 1], m, n, kind)
-
-    # Normal equations accumulated chunk by chunk: a streaming QR costs ~15x more in LAPACK
-    # for these tall, thin systems, and the sine design is well conditioned on spread-out
-    # points; iterative refinement below recovers the digits squaring loses when it is not.
-    gram = np.zeros((unknowns, unknowns))
-    rhs = np.zeros((unknowns, dim))
-    for part in chunks:
-        a = design(part)
-        gram += a.T @ a
-        rhs += a.T @ r[part]
-    eig = np.linalg.eigvalsh(gram)
-    scale = float(np.trace(gram)) / unknowns
-    if ridge is None:
-        # eig ratio 1e-12 is a singular-value ratio of 1e-6 for the design itself.
-        near_singular = eig[0] <= 1e-12 * eig[-1]
-        ridge = AUTO_RIDGE if (n_pts < 2 * unknowns or near_singular) else 0.0
-    system = gram + ridge * scale * np.eye(unknowns)
-
-    def solve(b: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.linalg.lstsq(system, b, rcond=None)[0]
-
-    coef = solve(rhs)
-    if eig[0] < 1e-6 * eig[-1]:
-        # cond(A) > 1e3: squaring it in the normal equations costs digits, so refine once.
-        correction = np.zeros_like(rhs)
-        for part in chunks:
-            a = design(part)
-            correction += a.T @ (r[part] - a @ coef)
-        coef += solve(correction - ridge * scale * coef)
-    coefficients = coef.reshape(m, n, dim)
-    err = np.empty(n_pts)
-    for part in chunks:
-        err[part] = np.linalg.norm(r[part] - design(part) @ coef, axis=1)
-    return Deformation(
-        coefficients=coefficients,
-        kind=kind,
-        ridge=float(ridge),
-        mean_error=float(err.mean()),
-        max_error=float(err.max()),
-    )
+    with _single_threaded_blas():
+        return _solve(r, p, _accumulate(r, p, m, n, kind), m, n, ridge)
 
 
 def choose_mn(
@@ -418,34 +689,41 @@ def choose_mn(
     r, p = _check_fit_input(residuals, params)
     if not tolerance > 0:
         raise InputError(f"tolerance must be > 0, got {tolerance}")
+    _check_kind(kind)
+    top = int(max_mn) if ridge is not None else min(int(max_mn), int(np.sqrt(r.shape[0])))
     best: Deformation | None = None
     last: Deformation | None = None
-    for k in range(1, max_mn + 1):
-        if ridge is None and k * k > r.shape[0]:
-            break
-        last = fit_deformation(r, p, k, k, kind, ridge)
-        if last.max_error <= tolerance:
-            best = last
-            break
-    if best is None:
-        reached = (
-            "too few points for M = N = 1"
-            if last is None
-            else f"best max error {last.max_error:.3g} at M = N = {last.m}"
-        )
-        raise FitError(
-            f"tolerance {tolerance:.3g} not reached with M = N <= {max_mn} ({reached}); raise "
-            "max_mn, loosen the tolerance, or check the parameterization and boundaries"
-        )
-    k = best.m
-    for m in range(1, k):
-        trial = fit_deformation(r, p, m, k, kind, ridge)
-        if trial.max_error <= tolerance:
-            best = trial
-            break
-    for n in range(1, k):
-        trial = fit_deformation(r, p, best.m, n, kind, ridge)
-        if trial.max_error <= tolerance:
-            best = trial
-            break
+    with _single_threaded_blas():
+        # One pass gathers the normal equations of every candidate (M, N <= top); each
+        # candidate then costs a small solve and one pass for its max error.
+        data = _accumulate(r, p, max(top, 1), max(top, 1), kind) if top >= 1 else None
+        for k in range(1, top + 1):
+            assert data is not None
+            last = _solve(r, p, data, k, k, ridge)
+            if last.max_error <= tolerance:
+                best = last
+                break
+        if best is None:
+            reached = (
+                "too few points for M = N = 1"
+                if last is None
+                else f"best max error {last.max_error:.3g} at M = N = {last.m}"
+            )
+            raise FitError(
+                f"tolerance {tolerance:.3g} not reached with M = N <= {max_mn} ({reached}); "
+                "raise max_mn, loosen the tolerance, or check the parameterization and "
+                "boundaries"
+            )
+        assert data is not None
+        k = best.m
+        for m in range(1, k):
+            trial = _solve(r, p, data, m, k, ridge)
+            if trial.max_error <= tolerance:
+                best = trial
+                break
+        for n in range(1, k):
+            trial = _solve(r, p, data, best.m, n, ridge)
+            if trial.max_error <= tolerance:
+                best = trial
+                break
     return best

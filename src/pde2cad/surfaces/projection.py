@@ -180,6 +180,7 @@ def project_points(
     chunk: int = 50_000,
     xtol: float = 1e-13,
     workers: int = -1,
+    initial: ArrayLike | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """Closest points on a parametric patch: the ``(u, v)`` of each point (Section 5.2.3).
 
@@ -205,6 +206,11 @@ def project_points(
         Threads working on chunks; -1 uses every core.
     xtol : float
         Stop when a step moves (u, v) by less than this.
+    initial : (N, 2) float, optional
+        Start parameters (clipped to [0, 1]^2) instead of the grid search, e.g. the
+        parameters on a previous base patch when the surface changed only a little. Newton
+        then finds the closest point of that basin: its distance bounds the global one from
+        above.
 
     Returns
     -------
@@ -230,6 +236,15 @@ def project_points(
         raise InputError(f"points contain NaN or inf (first at row {bad}); drop those rows first")
     if grid < 1 or iters < 0 or chunk < 1:
         raise InputError(f"grid, chunk must be >= 1 and iters >= 0; got {grid}, {chunk}, {iters}")
+    start_uv: NDArray[np.float64] | None = None
+    if initial is not None:
+        start_uv = np.asarray(initial, dtype=float)
+        if start_uv.shape != (pts.shape[0], 2) or not np.all(np.isfinite(start_uv)):
+            raise InputError(
+                f"initial must be finite (u, v) of shape ({pts.shape[0]}, 2), one per point; "
+                f"got shape {start_uv.shape}"
+            )
+        start_uv = np.clip(start_uv, 0.0, 1.0)
     jet_fn = _jet_function(surface)
     g = np.linspace(0.0, 1.0, grid + 1)
     gu, gv = (a.reshape(-1) for a in np.meshgrid(g, g, indexing="ij"))
@@ -261,11 +276,15 @@ def project_points(
 
     def run(start: int) -> None:
         part = slice(start, min(start + chunk, n))
-        # An approximate nearest sample (within 2x the true distance) is start enough for
-        # Newton and halves the KD-tree time.
-        _, idx = tree.query(pts[part], eps=1.0)
-        uv0 = np.stack([gu[idx], gv[idx]])
-        jet0 = tuple(a[:, idx] for a in grid_jet)
+        if start_uv is not None:
+            uv0 = np.ascontiguousarray(start_uv[part].T)
+            jet0 = jet_fn(uv0[0], uv0[1])
+        else:
+            # An approximate nearest sample (within 2x the true distance) is start enough
+            # for Newton and halves the KD-tree time.
+            _, idx = tree.query(pts[part], eps=1.0)
+            uv0 = np.stack([gu[idx], gv[idx]])
+            jet0 = tuple(a[:, idx] for a in grid_jet)
         p = np.ascontiguousarray(pts[part].T)
         uv, f, grad, hess = _project_chunk(jet_fn, p, uv0, jet0, iters, xtol)
         free = uv + _solve_step(uv, grad, hess, np.zeros(uv.shape[1]), False)
