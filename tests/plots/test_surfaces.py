@@ -277,3 +277,18 @@ def test_import_pde2cad_does_not_import_matplotlib() -> None:
         "assert 'matplotlib' not in sys.modules, 'matplotlib imported'"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_error_map_and_zebra_on_fitted_patches(tmp_path):
+    import pde2cad
+
+    rng = np.random.default_rng(3)
+    uv = rng.random((4000, 2))
+    pts = np.c_[uv[:, 0], uv[:, 1], 0.1 * np.sin(3 * uv[:, 0] + 2 * uv[:, 1])]
+    patch = pde2cad.fit_patch(pts, continuity="c0", m=6, n=6)
+    stats = error_map(patch, pts, patch.params, tmp_path / "err.png")
+    assert stats["n"] == 4000
+    assert abs(stats["mean"] - patch.errors["mean"]) < 1e-12
+    assert abs(stats["max"] - patch.errors["max"]) < 1e-12
+    zebra([patch], tmp_path / "zebra.png")
+    assert Image.open(tmp_path / "zebra.png").size[0] > 100
