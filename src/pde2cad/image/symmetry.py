@@ -55,6 +55,8 @@ _SEARCH_PIXELS = 40_000
 _SCAN_PIXELS = 4_000
 _REPORT_PIXELS = 1_000_000
 _SNAP_DEG = 0.5
+# Bounding boxes above this many pixels are sampled instead of listed pixel by pixel.
+_DENSE_PIXELS = 4_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -234,13 +236,25 @@ def _subsample(pix: NDArray[np.float64], budget: int) -> NDArray[np.float64]:
 
 def _region(p: NDArray[np.float64]) -> _Region:
     mask, origin = fill_loop(p)
-    rows, cols = np.nonzero(mask)
-    pix = np.column_stack([cols + origin[1] + 0.5, rows + origin[0] + 0.5])
     signed, centroid, cov = _polygon_moments(p)
+    if mask.size <= _DENSE_PIXELS:
+        rows, cols = np.nonzero(mask)
+    else:
+        # Huge regions (a 10000^2 scan): a uniform random sample of the bounding box, kept
+        # where it falls inside, estimates the IoU as well as every pixel would, in memory
+        # bounded by the sample (listing 50M pixel centres alone took 800 MB).
+        rng = np.random.default_rng(0)
+        fill = max(abs(signed) / mask.size, 0.01)
+        draw = int(min(_REPORT_PIXELS / fill, 20 * _REPORT_PIXELS))
+        rows = rng.integers(0, mask.shape[0], draw)
+        cols = rng.integers(0, mask.shape[1], draw)
+        inside = mask[rows, cols]
+        rows, cols = rows[inside], cols[inside]
+    pix = np.column_stack([cols + origin[1] + 0.5, rows + origin[0] + 0.5])
     radius = float(np.sqrt(((pix - centroid) ** 2).sum(axis=1).max())) if len(pix) else 0.0
     return _Region(
         mask=mask,
-        padded=np.pad(mask.astype(float), 1),
+        padded=np.pad(mask.astype(np.float32), 1),
         origin=origin,
         pix=pix,
         signed_area=signed,
