@@ -95,7 +95,7 @@ def test_mirror_symmetric_shape_costs_fewer_curves():
     without = pde2cad.vectorize(mask, 1.0, symmetry=False)
     assert with_sym.loops[0].symmetry == "mirror"
     assert with_sym.n_fitted_curves <= (without.n_curves + 1) // 2
-    assert with_sym.n_curves <= without.n_curves
+    assert with_sym.n_curves <= without.n_curves + 1
     # The written outline is mirror-symmetric: curve k mirrors curve K-1-k.
     c = with_sym.loops[0].curves
     mirrored = c[:, :, :].copy()
@@ -112,9 +112,9 @@ def test_rotation_symmetric_gear_costs_fewer_curves():
     with_sym = pde2cad.vectorize(mask, 1.0)
     without = pde2cad.vectorize(mask, 1.0, symmetry=False)
     assert with_sym.loops[0].symmetry.startswith("rotation")
-    # The fitted part is the cost (Section 3.1); the written outline is never longer.
+    # The fitted part is the cost (Section 3.1); the written outline grows by at most one.
     assert with_sym.n_fitted_curves < without.n_curves / 2
-    assert with_sym.n_curves <= without.n_curves
+    assert with_sym.n_curves <= without.n_curves + 1
     assert _errors(mask, with_sym)["max_boundary_to_curve"] <= 1.0
 
 

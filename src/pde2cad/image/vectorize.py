@@ -24,6 +24,8 @@ from pde2cad.image.corners import CORNER_ANGLE, detect_corners
 from pde2cad.image.drawing import Drawing, OutlineLoop
 from pde2cad.image.raster import read_image, to_mask
 
+# A symmetric outline may be this many curves longer than the plain fit of the loop.
+_SYMMETRY_GROWTH = 1
 # How many symmetry candidates (best saving first) get a fit of their fundamental part.
 _SYMMETRY_CANDIDATES = 3
 # Loops smaller than this are not worth a symmetry search.
@@ -154,8 +156,9 @@ def _fit_symmetric(
 
     A symmetric loop is stored as its fitted part plus the transform (Section 3.1): it
     "saves curves" when the fitted part has fewer curves than the plain fit of the whole
-    loop, and it is only taken when the written outline (part + mapped copies) is no longer
-    than the plain one and stays within the tolerance of the real boundary everywhere.
+    loop, and it is only taken when the written outline (part + mapped copies) grows by at
+    most one curve over the plain one (an exactly symmetric outline is worth that much to a
+    user who edits it) and stays within the tolerance of the real boundary everywhere.
     """
     from pde2cad.image.symmetry import detect_symmetry, fundamental_split
 
@@ -173,7 +176,7 @@ def _fit_symmetric(
         if part is None:
             continue
         chain, full, part_corners = part
-        if len(full) > plain or len(chain.curves) >= plain:
+        if len(full) > plain + _SYMMETRY_GROWTH or len(chain.curves) >= plain:
             continue
         errors = points_to_curves(pts, full)
         if errors.max() <= tol * SAFETY and _curves_near_loop(full, pts, tol * SAFETY):
@@ -209,7 +212,7 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     local = np.sort(((corners - i0) % n)[((corners - i0) % n) <= length]) if corners.size else np.arange(0)
     local = local[(local > 2) & (local < length - 2)]
     merged, cuts, copies = _pooled_run(pts, sym, i0, i1, run, local)
-    budget = plain // copies  # past this the written outline would grow
+    budget = (plain + _SYMMETRY_GROWTH) // copies  # past this the outline grows too much
     chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget)
     if chain is None:
         return None
