@@ -109,6 +109,23 @@ class Drawing:
             return 0.0
         return float(np.average([loop.mean_error for loop in self.loops], weights=counts))
 
+    def validate(self) -> None:
+        """Raise InputError when the drawing cannot be written (writers call this first)."""
+        from pde2cad.errors import InputError
+
+        if self.width <= 0 or self.height <= 0:
+            raise InputError(f"drawing size must be positive, got {self.width} x {self.height} px")
+        if self.mm_per_px is not None and not (np.isfinite(self.mm_per_px) and self.mm_per_px > 0):
+            raise InputError(f"mm_per_px must be a positive number or None, got {self.mm_per_px}")
+        for loop in self.loops:
+            c = np.asarray(loop.curves, dtype=float)
+            if c.size and (c.ndim != 3 or c.shape[1:] != (4, 2)):
+                raise InputError(f"loop curves must have shape (K, 4, 2), got {c.shape}")
+            if not np.all(np.isfinite(c)):
+                raise InputError(
+                    f"loop of shape {loop.shape} has NaN or inf control points; refit the image"
+                )
+
     def shapes(self) -> list[list[OutlineLoop]]:
         """Loops grouped per shape, each group with its outer loop first, then its holes."""
         groups: dict[int, list[OutlineLoop]] = {}

@@ -144,28 +144,13 @@ def _add_loop(
 def _validate(drawing: Drawing, curves: str, tolerance: float | None) -> None:
     if curves not in CURVE_MODES:
         raise InputError(f"curves must be one of {', '.join(CURVE_MODES)}, got {curves!r}")
-    if drawing.width <= 0 or drawing.height <= 0:
-        raise InputError(
-            f"drawing size must be positive, got {drawing.width} x {drawing.height} px"
-        )
-    if drawing.mm_per_px is not None and not (
-        np.isfinite(drawing.mm_per_px) and drawing.mm_per_px > 0
-    ):
-        raise InputError(f"mm_per_px must be a positive number or None, got {drawing.mm_per_px}")
+    drawing.validate()
     if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be a positive number or None, got {tolerance}")
     if tolerance is None and curves != "spline" and not drawing.tolerance > 0:
         raise InputError(
             f"drawing.tolerance is {drawing.tolerance}; pass tolerance=... for {curves} output"
         )
-    for loop in drawing.loops:
-        c = np.asarray(loop.curves, dtype=float)
-        if c.size and (c.ndim != 3 or c.shape[1:] != (4, 2)):
-            raise InputError(f"loop curves must have shape (K, 4, 2), got {c.shape}")
-        if not np.all(np.isfinite(c)):
-            raise InputError(
-                f"loop of shape {loop.shape} has NaN or inf control points; refit the image"
-            )
 
 
 def write_dxf(

@@ -41,27 +41,6 @@ def _loop_path(curves: NDArray[np.float64]) -> str:
     return " ".join(parts)
 
 
-def _validate(drawing: Drawing) -> None:
-    if drawing.width <= 0 or drawing.height <= 0:
-        raise InputError(
-            f"drawing size must be positive, got {drawing.width} x {drawing.height} px"
-        )
-    if drawing.mm_per_px is not None and not (
-        np.isfinite(drawing.mm_per_px) and drawing.mm_per_px > 0
-    ):
-        raise InputError(
-            f"mm_per_px must be a positive number or None, got {drawing.mm_per_px}"
-        )
-    for loop in drawing.loops:
-        c = np.asarray(loop.curves, dtype=float)
-        if c.size and (c.ndim != 3 or c.shape[1:] != (4, 2)):
-            raise InputError(f"loop curves must have shape (K, 4, 2), got {c.shape}")
-        if not np.all(np.isfinite(c)):
-            raise InputError(
-                f"loop of shape {loop.shape} has NaN or inf control points; refit the image"
-            )
-
-
 def svg_string(drawing: Drawing, fill: str = "#000000", stroke: str | None = None) -> str:
     """The SVG document for ``drawing`` as text.
 
@@ -80,7 +59,7 @@ def svg_string(drawing: Drawing, fill: str = "#000000", stroke: str | None = Non
         A complete SVG 1.1 document. ``viewBox="0 0 W H"`` is in pixels; when
         ``drawing.mm_per_px`` is set, ``width``/``height`` are in mm, else in px.
     """
-    _validate(drawing)
+    drawing.validate()
     f = format_number
     w, h = drawing.width, drawing.height
     if drawing.mm_per_px is not None:

@@ -223,29 +223,30 @@ class Patch:
         }
 
     # ----------------------------------------------------------------- evaluation
+    @property
+    def surface(self) -> DeformedPatch:
+        """The fitted surface, base + deformation (Eq. 5.20), which does the evaluation."""
+        return DeformedPatch(self.base, self.deformation)
+
     def evaluate(self, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
         """Points ``S(u, v)``; ``u``, ``v`` broadcast, result ``shape + (3,)``."""
-        return self.base.evaluate(u, v) + self.deformation.evaluate(u, v)
+        return self.surface.evaluate(u, v)
 
     def derivatives(
         self, u: ArrayLike, v: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """First partial derivatives ``(S_u, S_v)``, each ``shape + (3,)``."""
-        a, b = self.base.derivatives(u, v), self.deformation.derivatives(u, v)
-        return a[0] + b[0], a[1] + b[1]
+        return self.surface.derivatives(u, v)
 
     def second_derivatives(
         self, u: ArrayLike, v: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """``(S_uu, S_uv, S_vv)``, each ``shape + (3,)``."""
-        a, b = self.base.second_derivatives(u, v), self.deformation.second_derivatives(u, v)
-        return a[0] + b[0], a[1] + b[1], a[2] + b[2]
+        return self.surface.second_derivatives(u, v)
 
     def jet(self, u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64], ...]:
         """``(S, S_u, S_v, S_uu, S_uv, S_vv)`` in one pass (what a projection needs)."""
-        return tuple(
-            x + y for x, y in zip(self.base.jet(u, v), self.deformation.jet(u, v), strict=True)
-        )
+        return self.surface.jet(u, v)
 
     def normals(self, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
         """Unit normals ``S_u x S_v / |S_u x S_v|``, ``shape + (3,)``.
