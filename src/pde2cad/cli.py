@@ -96,7 +96,8 @@ def _run_vectorize(args: argparse.Namespace) -> int:
     symmetric = sum(1 for lp in drawing.loops if lp.symmetry)
     print(
         f"vectorize: {len(drawing.shapes())} shapes, {len(drawing.loops)} loops, "
-        f"{drawing.n_curves} curves, max error {drawing.max_error:.3f} px "
+        f"{drawing.n_curves} curves ({drawing.n_fitted_curves} independent), "
+        f"max error {drawing.max_error:.3f} px "
         f"(tolerance {args.tolerance:g}), {symmetric} symmetric loops, "
         f"{drawing.time_s:.2f} s -> {', '.join(map(str, outputs))}"
     )
