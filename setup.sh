@@ -8,6 +8,9 @@ set -euo pipefail
 cd "$(dirname "$0")"
 
 APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1)
+PYTHON=${PYTHON:-python3}
+# Debian's own python3 needs python3-venv for `python3 -m venv` (ensurepip).
+"$PYTHON" -c "import venv, ensurepip" 2>/dev/null || APT_PACKAGES+=(python3-venv)
 
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
@@ -21,7 +24,6 @@ if [ ${#missing[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
 
-PYTHON=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   "$PYTHON" -m venv .venv
