@@ -86,3 +86,19 @@ def test_bad_input_is_refused():
         fit_chain(np.zeros((5, 2)) + np.arange(5)[:, None], 0.0)
     with pytest.raises(InputError, match="n >= 2"):
         fit_chain(np.zeros((1, 2)), 1.0)
+
+
+def test_blunt_corner_between_straight_sides_moves_to_the_lines_meeting_point():
+    from pde2cad.curves.piecewise import corner_positions
+
+    # Two straight sides meeting at (20, 0), with the tip vertex cut off by half a unit.
+    side_a = np.c_[np.arange(0.0, 20.0), np.zeros(20)]
+    side_b = np.c_[np.full(20, 20.0), np.arange(0.0, 20.0) + 0.5]
+    loop = np.vstack([side_a, [[19.6, 0.4]], side_b, [[0.0, 19.5]]])
+    tip = corner_positions(loop, np.array([20]), max_shift=1.0)[0]
+    assert np.abs(tip - [20.0, 0.0]).max() < 1e-9
+    # A corner whose sides curve keeps its own point.
+    th = np.linspace(0, np.pi, 20)
+    arc = np.c_[np.cos(th), np.sin(th)] * 6
+    kept = corner_positions(np.vstack([arc, arc[::-1] * [1, -1]]), np.array([19]))[0]
+    assert np.array_equal(kept, arc[-1])

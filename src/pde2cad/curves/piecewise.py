@@ -369,6 +369,7 @@ def fit_closed(
     smooth: bool = True,
     method: str = "optimal",
     start: int | None = None,
+    sharpen: bool = True,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -389,6 +390,9 @@ def fit_closed(
         off for points that are already smooth samples.
     method : str
         See :func:`fit_chain`.
+    sharpen : bool
+        Place corners between straight sides where the two sides' lines meet (see
+        :func:`corner_positions`) instead of on their nearest point.
 
     Returns
     -------
@@ -431,17 +435,71 @@ def fit_closed(
     ring = np.r_[offset:n, 0 : offset + 1]
     closed = pts[ring]
     cuts = np.concatenate([cidx - offset, [n]])
+    tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
+    tips = np.vstack([tips, tips[:1]])
     curves, fits, breaks, corner_list = [], [], [0], []
-    for a, b in zip(cuts[:-1], cuts[1:]):
+    for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         run = closed[a : b + 1]
         pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
-        chain = fit_chain(run, tolerance, g1=g1, param_points=pos, join_tangents=tan, method=method)
+        chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
+                          param_points=pos, join_tangents=tan, method=method)
         corner_list.append(len(fits))
         corner_list.extend(len(fits) + c for c in chain.corners if c != 0)
         curves.append(chain.curves)
         fits.extend(chain.fits)
         breaks.extend(int(a) + chain.breaks[1:])
     return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list))), offset
+
+
+def corner_positions(
+    points: NDArray[np.float64],
+    corners: NDArray[np.int64],
+    reach: int = 10,
+    max_shift: float = 0.75,
+    straightness: float = 0.75,
+) -> NDArray[np.float64]:
+    """Corner points between straight sides, placed where the sides' lines meet.
+
+    A digitized corner is blunt: its nearest boundary point can sit most of a pixel off
+    both sides' lines, and a side forced through it then needs a second piece. Where both
+    sides are straight near the corner (total-least-squares line through ``reach`` points
+    with every point within ``straightness``), the corner moves to the lines' intersection
+    if that is within ``max_shift``; other corners stay on their point.
+
+    Parameters
+    ----------
+    points : (n, D) float, a closed loop
+    corners : (c,) int, increasing
+
+    Returns
+    -------
+    (c, D) float
+    """
+    n = len(points)
+    out = points[corners].astype(float).copy()
+    gaps = np.diff(np.r_[corners, corners[0] + n])
+    for j, i in enumerate(corners):
+        before = min(reach, int(gaps[j - 1]) // 2)
+        after = min(reach, int(gaps[j]) // 2)
+        if before < 4 or after < 4:
+            continue
+        lines = []
+        for side in (points[(i - np.arange(1, before + 1)) % n], points[(i + np.arange(1, after + 1)) % n]):
+            c = side.mean(axis=0)
+            direction = np.linalg.svd(side - c)[2][0]
+            off = side - c - np.outer((side - c) @ direction, direction)
+            lines.append((c, direction, float(np.linalg.norm(off, axis=1).max())))
+        (c1, d1, r1), (c2, d2, r2) = lines
+        if max(r1, r2) > straightness:
+            continue
+        m = np.array([[d1 @ d1, -d1 @ d2], [d1 @ d2, -d2 @ d2]])
+        if abs(np.linalg.det(m)) < 0.1:  # nearly parallel sides: no reliable tip
+            continue
+        s1, s2 = np.linalg.solve(m, np.array([(c2 - c1) @ d1, (c2 - c1) @ d2]))
+        tip = 0.5 * ((c1 + s1 * d1) + (c2 + s2 * d2))
+        if np.linalg.norm(tip - points[i]) <= max_shift:
+            out[j] = tip
+    return out
 
 
 def _closed_tangents(points: NDArray[np.float64], k: int = 2) -> NDArray[np.float64]:
