@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import points_to_curves
 from pde2cad.curves.parameterize import METHODS
-from pde2cad.curves.piecewise import SAFETY, ChainFit, denoise, fit_chain, fit_closed
+from pde2cad.curves.piecewise import SAFETY, ChainFit, corner_positions, denoise, fit_chain, fit_closed
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
 from pde2cad.image.corners import CORNER_ANGLE, detect_corners
@@ -197,6 +197,8 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     near = lambda i: corners.size > 0 and np.min(np.abs((corners - i + n // 2) % n - n // 2)) <= 2  # noqa: E731
     pos, tan = denoise(run, closed=False)
     c_start, c_end = near(i0), near(i1)
+    # The same sharpened corner points as the plain fit (corners between straight sides).
+    tips = dict(zip(corners.tolist(), corner_positions(pts, corners, max_shift=0.75 * tol))) if corners.size else {}
     if sym.kind == "mirror":
         axis, center = sym.axis, sym.center
         p_start = center + np.dot(run[0] - center, axis) * axis
@@ -205,7 +207,7 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
         t_start = None if c_start else normal * np.sign(np.dot(normal, tan[0]) or 1.0)
         t_end = None if c_end else normal * np.sign(np.dot(normal, tan[-1]) or 1.0)
     else:
-        p_start = run[0] if c_start else pos[0]
+        p_start = tips.get(int(i0), run[0]) if c_start else pos[0]
         p_end = sym.apply(p_start)
         t_start = None if c_start else tan[0]
         t_end = None if c_start else sym.matrix @ tan[0]
@@ -213,7 +215,15 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     local = local[(local > 2) & (local < length - 2)]
     merged, cuts, copies = _pooled_run(pts, sym, i0, i1, run, local)
     budget = (plain + _SYMMETRY_GROWTH) // copies  # past this the outline grows too much
-    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget)
+    cut_points = [tips[int((i0 + c) % n)] for c in local] if len(cuts) == len(local) else None
+    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget, cut_points)
+    if chain is None and (cut_points or (c_start and sym.kind != "mirror")):
+        # Sharpened tips come from this part's own raster; the other parts' rasters can
+        # disagree (non-grid rotations), so retry on the corner points themselves.
+        if sym.kind != "mirror" and c_start:
+            p_start = run[0]
+            p_end = sym.apply(p_start)
+        chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget)
     if chain is None:
         return None
     if sym.kind == "mirror":
@@ -286,19 +296,23 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
 
 
 def _fit_run(
-    run, local_corners, tol, p_start, p_end, t_start, t_end, g1, method, copies=1, budget=None
+    run, local_corners, tol, p_start, p_end, t_start, t_end, g1, method, copies=1, budget=None,
+    cut_points=None,
 ) -> ChainFit | None:
     """Fit an open run split at its corners, with given end points and end tangents; None
-    when some piece cannot meet the tolerance (the symmetry is then not worth it)."""
+    when some piece cannot meet the tolerance (the symmetry is then not worth it).
+    ``cut_points`` are the corners' positions (default: their points in ``run``)."""
     cuts = np.r_[0, local_corners, len(run) - 1].astype(int)
     curves, fits, breaks = [], [], [0]
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         sub = run[a : b + 1]
         pos, tan = denoise(sub, closed=False, pos_window=7 * copies, tan_window=17 * copies)
         first, last = j == 0, j == len(cuts) - 2
+        start_at = p_start if first else (None if cut_points is None else cut_points[j - 1])
+        end_at = p_end if last else (None if cut_points is None else cut_points[j])
         chain = fit_chain(
             sub, tol,
-            p_start=p_start if first else None, p_end=p_end if last else None,
+            p_start=start_at, p_end=end_at,
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
             max_pieces=None if budget is None else budget - len(fits),
