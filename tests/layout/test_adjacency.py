@@ -1,0 +1,150 @@
+"""Layout of segmented clouds: adjacency, corners, open boundary, and the validation errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from pde2cad.errors import InputError
+from pde2cad.layout import Layout, build_layout
+
+
+def grid(n: int, lo: float = -1.0, hi: float = 1.0, seed: int = 0) -> NDArray[np.float64]:
+    """Cell centres of an n x n grid on [lo, hi]^2, jittered by 5 % of the spacing (M, 2)."""
+    rng = np.random.default_rng(seed)
+    g = lo + (np.arange(n) + 0.5) / n * (hi - lo)
+    uv = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    return uv + rng.normal(0.0, 0.05 * (hi - lo) / n, uv.shape)
+
+
+def sheet(n: int = 100) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """z = 0.1 sin(x) sin(y) on [-1, 1]^2, labelled by quadrant (a 2 x 2 grid of patches)."""
+    uv = grid(n)
+    pts = np.column_stack([uv, 0.1 * np.sin(uv[:, 0]) * np.sin(uv[:, 1])])
+    return pts, (uv[:, 0] > 0).astype(np.int64) + 2 * (uv[:, 1] > 0)
+
+
+def cube_faces(n: int = 50) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The 6 faces of [-1, 1]^3, n x n points each, one label per face."""
+    uv = grid(n)
+    u, v, one = uv[:, 0], uv[:, 1], np.ones(len(uv))
+    faces = [(-one, u, v), (one, u, v), (u, -one, v), (u, one, v), (u, v, -one), (u, v, one)]
+    pts = np.vstack([np.column_stack(f) for f in faces])
+    return pts, np.repeat(np.arange(6), len(uv))
+
+
+def assert_corners(layout: Layout, truth: NDArray[np.float64], tol: float) -> None:
+    """Every true corner has exactly one detected corner within ``tol`` and vice versa."""
+    assert len(layout.corners) == len(truth)
+    dist, nearest = cKDTree(layout.corners).query(truth)
+    assert dist.max() < tol, dist.max()
+    assert len(set(nearest.tolist())) == len(truth)
+
+
+def test_sheet_2x2() -> None:
+    pts, lab = sheet()
+    layout = build_layout(pts, lab)
+    np.testing.assert_array_equal(layout.labels_present, [0, 1, 2, 3])
+    assert sorted(layout.adjacency) == [(0, 1), (0, 2), (1, 3), (2, 3)]  # no diagonals
+    # Each border is ~100 samples long; every border point touches the other label.
+    for (a, b), border in layout.borders.items():
+        assert layout.adjacency[(a, b)] > 150
+        assert np.abs(border[:, 0 if b - a == 1 else 1]).max() < 3 * layout.spacing
+    truth_uv = np.array([[x, y] for x in (-1.0, 0.0, 1.0) for y in (-1.0, 0.0, 1.0)])
+    truth = np.column_stack([truth_uv, 0.1 * np.sin(truth_uv[:, 0]) * np.sin(truth_uv[:, 1])])
+    diagonal = float(np.linalg.norm(np.ptp(truth, axis=0)))
+    assert_corners(layout, truth, 0.02 * diagonal)
+    for label, which in layout.segment_corners.items():
+        assert len(which) == 4, label
+        # The centre corner (0, 0) belongs to all four segments.
+        assert np.linalg.norm(layout.corners[which, :2], axis=1).min() < 0.05
+    # Open boundary: the two outer sides of each quadrant, nothing on the inner borders.
+    for label, ob in layout.open_boundary.items():
+        assert len(ob) > 50
+        assert (np.abs(ob[:, :2]).max(axis=1) > 0.95).all(), label
+
+
+def test_cube_faces() -> None:
+    pts, lab = cube_faces()
+    layout = build_layout(pts, lab)
+    assert len(layout.adjacency) == 12
+    assert (0, 1) not in layout.adjacency and (2, 3) not in layout.adjacency
+    truth = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    assert_corners(layout, truth, 0.02 * np.sqrt(12.0))
+    assert all(len(w) == 4 for w in layout.segment_corners.values())
+    assert all(len(ob) == 0 for ob in layout.open_boundary.values())  # closed surface
+
+
+def test_cube_sphere() -> None:
+    pts, lab = cube_faces(60)
+    pts = pts / np.linalg.norm(pts, axis=1, keepdims=True)
+    layout = build_layout(pts, lab)
+    assert len(layout.adjacency) == 12
+    truth = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    assert_corners(layout, truth / np.sqrt(3.0), 0.02 * 2.0)
+    assert all(len(w) == 4 for w in layout.segment_corners.values())
+    # Each corner is where 3 patches meet.
+    counts = np.bincount(np.concatenate(list(layout.segment_corners.values())))
+    np.testing.assert_array_equal(counts, 3)
+
+
+def test_l_shape_has_six_corners() -> None:
+    # [0, 3]^2: segment 7 is the L (bottom strip + left strip), segment 2 the square [1, 3]^2.
+    uv = grid(90, 0.0, 3.0)
+    pts = np.column_stack([uv, np.zeros(len(uv))])
+    lab = np.where((uv[:, 0] > 1.0) & (uv[:, 1] > 1.0), 2, 7)
+    with pytest.raises(InputError, match="segment 7 has 6 corners; a patch needs 3 or 4"):
+        build_layout(pts, lab)
+    layout = build_layout(pts, lab, check=False)
+    assert len(layout.segment_corners[7]) == 6
+    assert len(layout.segment_corners[2]) == 4  # the kink of the border is a corner of both
+    assert list(layout.adjacency) == [(2, 7)]
+
+
+def test_split_segment() -> None:
+    # Three strips; the outer two share label 4 and are not connected.
+    uv = grid(90, 0.0, 3.0)
+    pts = np.column_stack([uv, np.zeros(len(uv))])
+    lab = np.where((uv[:, 0] > 1.0) & (uv[:, 0] < 2.0), 1, 4)
+    with pytest.raises(InputError, match="segment 4 falls apart into 2 separate pieces"):
+        build_layout(pts, lab)
+
+
+def test_tiny_segment_and_bad_input() -> None:
+    pts, lab = sheet(60)
+    lab = lab.copy()
+    lab[:20] = 9
+    with pytest.raises(InputError, match="segment 9 has 20 points; a segment needs at least 50"):
+        build_layout(pts, lab)
+    with pytest.raises(InputError, match="one value per point"):
+        build_layout(pts, lab[:-1])
+    bad = pts.copy()
+    bad[[3, 5]] = np.nan
+    with pytest.raises(InputError, match="NaN or inf in 2 rows"):
+        build_layout(bad, lab)
+
+
+def test_curved_seam_and_three_sided_patch() -> None:
+    # A triangle split from a square by a diagonal: two 3-sided patches, 4 corners in all.
+    uv = grid(80)
+    pts = np.column_stack([uv, 0.2 * uv[:, 0] ** 2])
+    lab = (uv[:, 1] > uv[:, 0]).astype(np.int64)
+    layout = build_layout(pts, lab)
+    assert list(layout.adjacency) == [(0, 1)]
+    assert len(layout.corners) == 4
+    assert all(len(w) == 3 for w in layout.segment_corners.values())
+
+
+def test_random_noisy_samples() -> None:
+    # Uniform random samples (irregular spacing) with noise across the sheet: same topology.
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(-1.0, 1.0, (20_000, 2))
+    z = 0.1 * np.sin(uv[:, 0]) * np.sin(uv[:, 1]) + rng.normal(0.0, 0.003, len(uv))
+    layout = build_layout(np.column_stack([uv, z]), (uv[:, 0] > 0) + 2 * (uv[:, 1] > 0))
+    assert sorted(layout.adjacency) == [(0, 1), (0, 2), (1, 3), (2, 3)]
+    truth = np.array([[x, y] for x in (-1.0, 0.0, 1.0) for y in (-1.0, 0.0, 1.0)])
+    assert len(layout.corners) == 9
+    assert cKDTree(layout.corners[:, :2]).query(truth)[0].max() < 0.02 * np.sqrt(8.0)
+    assert all(len(w) == 4 for w in layout.segment_corners.values())
