@@ -32,12 +32,11 @@ from scipy.spatial import cKDTree
 
 from pde2cad.bspline.convert import patch_to_bspline
 from pde2cad.bspline.data import BSplineSurface
-from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.layout import Layout, build_layout
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Patch, fit_patch
-from pde2cad.surfaces.region import RegionBoundary, extract_boundary, pca_frame
+from pde2cad.surfaces.region import RegionBoundary, extract_boundary, fit_side, pca_frame
 
 #: Default CAD (deformation -> B-spline) tolerance, relative to the cloud's bbox diagonal.
 CAD_TOLERANCE = 1e-4
@@ -55,8 +54,6 @@ EDGE_BIN = 2.0
 EDGE_END = 4.0
 #: Edge-curve breaks are rounded to multiples of 2**-BREAK_BITS (see _dyadic_breaks).
 BREAK_BITS = 24
-#: Newton rounds of the edge fits.
-EDGE_ROUNDS = 10
 
 
 @dataclass
@@ -176,14 +173,7 @@ def _fit_edge(
     mid = mid[far]
     if len(mid) < 4:
         return None
-    smooth, tangent = denoise(mid, closed=False)
-    chain = fit_chain(
-        mid, tolerance, p_start=start, p_end=end, g1=True,
-        param_points=smooth, join_tangents=tangent, rounds=EDGE_ROUNDS,
-    )
-    ctrl = chain.curves.copy()
-    ctrl[0, 0], ctrl[-1, 3] = start, end
-    return PiecewiseBezier.from_chain(ctrl), float(chain.max_error)
+    return fit_side(mid, tolerance, start, end)
 
 
 def reconstruct(
@@ -285,14 +275,7 @@ def reconstruct(
             run = _side_run(region, k)
             run = run if forward else run[::-1]
             tol = region.tolerance if tolerance is None else tolerance
-            smooth, tangent = denoise(run, closed=False)
-            chain = fit_chain(
-                run, tol, p_start=lo, p_end=hi, g1=True,
-                param_points=smooth, join_tangents=tangent, rounds=EDGE_ROUNDS,
-            )
-            ctrl = chain.curves.copy()
-            ctrl[0, 0], ctrl[-1, 3] = lo, hi
-            fitted = PiecewiseBezier.from_chain(ctrl), float(chain.max_error)
+            fitted = fit_side(run, tol, lo, hi)
         edges[key], edge_errors[key] = _dyadic_breaks(fitted[0]), fitted[1]
     timings["edges"] = time.perf_counter() - t0
 

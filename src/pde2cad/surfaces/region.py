@@ -740,6 +740,28 @@ def _noise_tolerance(runs: list[NDArray[np.float64]], diagonal: float) -> float:
     return max(NOISE_FACTOR * rms, TOLERANCE_FLOOR * diagonal)
 
 
+def fit_side(
+    run: NDArray[np.float64], tolerance: float, start: NDArray[np.float64], end: NDArray[np.float64]
+) -> tuple[PiecewiseBezier, float]:
+    """Fit ordered points of one side between two fixed corners (G1 inside, Ch. 3 fitter).
+
+    The corners are assigned after the fit so that sides meeting at a corner (and patches
+    sharing an edge) hold bit-identical corner points.
+
+    Returns
+    -------
+    (PiecewiseBezier, max_error)
+    """
+    smooth, tangent = denoise(run, closed=False)
+    chain = fit_chain(
+        run, tolerance, p_start=start, p_end=end, g1=True,
+        param_points=smooth, join_tangents=tangent, rounds=SIDE_ROUNDS,
+    )
+    ctrl = chain.curves.copy()
+    ctrl[0, 0], ctrl[-1, 3] = start, end
+    return PiecewiseBezier.from_chain(ctrl), float(chain.max_error)
+
+
 def extract_boundary(
     points: ArrayLike,
     *,
@@ -824,17 +846,8 @@ def extract_boundary(
     sides: list[PiecewiseBezier] = []
     errors = np.empty(c)
     for k, run in enumerate(runs):  # 3-4 sides, each fitted as a whole
-        start, end = cpos[k], cpos[(k + 1) % c]
-        smooth, tangent = denoise(run, closed=False)
-        chain = fit_chain(
-            run, tol, p_start=start, p_end=end, g1=True,
-            param_points=smooth, join_tangents=tangent, rounds=SIDE_ROUNDS,
-        )
-        ctrl = chain.curves.copy()
-        # The fitter honours p_start / p_end; assigning makes the shared corners bit-identical.
-        ctrl[0, 0], ctrl[-1, 3] = start, end
-        sides.append(PiecewiseBezier.from_chain(ctrl))
-        errors[k] = chain.max_error
+        side, errors[k] = fit_side(run, tol, cpos[k], cpos[(k + 1) % c])
+        sides.append(side)
     return RegionBoundary(
         loop=loop,
         loop_index=loop_index.astype(np.int64),
