@@ -1,0 +1,682 @@
+"""Edge network of a segmented cloud: refined corners and one smooth curve per edge.
+
+:func:`~pde2cad.layout.adjacency.build_layout` finds which segments touch and roughly where
+their corners are (cloud points, up to a neighbour radius off). This module turns that into
+the curves the patches share:
+
+1. **Corners.** Layout corners on a border between exactly two segments, away from the open
+   boundary, are kinks of a border, not patch corners: they are dropped.
+2. **Topology.** Two adjacent segments share exactly two corners: the ends of their common
+   edge. A segment's open edges are the runs of its open-boundary loop between its corners.
+   Each segment's edges must form one cycle through all its corners (its side loop).
+3. **Edge data.** A shared edge is fitted to the *midline* of the border band: the midpoint
+   of each border point and its nearest border point of the other segment. An open edge is
+   fitted to its open-boundary run.
+4. **Free fits.** Each edge gets a clamped cubic B-spline with ``2**j`` uniform spans, the
+   count chosen by the Bayesian information criterion (enough spans for the shape, not so
+   many that it follows the sampling noise), with closest-point reparameterization.
+5. **Corner refinement.** A corner is moved to the least-squares meeting point of the end
+   tangent lines of its edges' free fits, then projected onto a quadric fitted to the cloud
+   around it, which also gives the corner's normal. On random samples this puts corners well
+   inside a sample spacing of the truth, where the nearest cloud point may be a spacing off.
+6. **Joint fit.** All edges are refitted together with their ends on the refined corners and
+   their end tangents in the corner's tangent plane. Where the edges through a corner pair
+   up (four patches meeting, or two patches meeting the open boundary), opposite edges get
+   equal and opposite end derivatives: the layout that lets
+   :mod:`pde2cad.layout.ribbons` build C1 joins. Where an odd number of patches meet
+   (three on a cube-sphere) no such pairing exists (the vertex-enclosure problem).
+
+Uniform spans with a power-of-two count give dyadic breaks, so an edge reversed for the
+neighbour has the exact same breaks and both faces carry bitwise-identical edge poles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import BSpline
+from scipy.sparse import coo_matrix, identity
+from scipy.sparse.linalg import spsolve
+from scipy.spatial import cKDTree
+
+from pde2cad.errors import InputError
+from pde2cad.layout.adjacency import CLUSTER_FACTOR, Layout
+from pde2cad.surfaces.boundary import PiecewiseBezier
+
+Key = tuple[int, int]
+
+#: Candidate span counts of an edge curve (powers of two keep the breaks dyadic).
+SPAN_CHOICES = (1, 2, 4, 8, 16)
+#: Fewest data points per span.
+POINTS_PER_SPAN = 6
+#: Closest-point reparameterization rounds per fit.
+REPARAM_ROUNDS = 3
+#: Border data closer than this many neighbour radii to a rough corner is ignored by the
+#: free fits (near a junction the midline of one pair is disturbed by the third segment).
+END_TRIM = 1.0
+#: Corners move at most this many neighbour radii in the refinement.
+MAX_CORNER_MOVE = 3.0
+#: Quadric fitted to the cloud within this many neighbour radii of a corner.
+QUADRIC_RADIUS = 3.0
+#: Edges through a corner are paired when their free fits turn by less than this (degrees).
+PAIR_ANGLE = 25.0
+#: Border points are paired with the nearest point across the border when it lies within
+#: this many spacings; their midpoints trace the border. A point deeper in the band pairs with
+#: a point near the border's foot and its midpoint sits half its depth off the border.
+PAIR_REACH = 2.5
+#: Cloud neighbours of the quadric that projects edge samples onto the surface.
+MLS_NEIGHBOURS = 40
+#: Edge samples per span projected onto the surface for the final fit.
+SAMPLES_PER_SPAN = 24
+#: Fewest spans of the final (projected) edge fit: its data are smooth samples on the surface.
+MIN_FINAL_SPANS = 4
+#: Relative ridge of the joint least squares (keeps spans without data well defined).
+RIDGE = 1e-9
+
+
+@dataclass
+class EdgeNetwork:
+    """Corners, side loops and the shared curve of every edge.
+
+    Attributes
+    ----------
+    corners : (C, 3) float
+        Refined corner positions.
+    normals : (C, 3) float
+        Unit surface normal at each corner (orientation arbitrary).
+    loops : dict[int, list[int]]
+        Per segment label, its corner ids in side-loop order.
+    curves : dict[(int, int), PiecewiseBezier]
+        Per edge (sorted corner-id pair), the curve from the smaller id to the larger.
+    users : dict[(int, int), list[int]]
+        Segment labels using each edge (one for an open edge, two for a shared one).
+    errors : dict[(int, int), float]
+        Largest distance of the edge's data (border midline or open run) to its curve.
+    rms : dict[(int, int), float]
+        Root-mean-square of the same distances.
+    pairs : dict[int, list[((int, int), (int, int))]]
+        Per corner, the edges paired across it (equal and opposite end derivatives).
+    regular : dict[int, bool]
+        Whether each corner admits the pairing (every edge in at most one pair).
+    spans : dict[(int, int), int]
+        Uniform spans of each edge curve.
+    """
+
+    corners: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    loops: dict[int, list[int]]
+    curves: dict[Key, PiecewiseBezier]
+    users: dict[Key, list[int]]
+    errors: dict[Key, float]
+    rms: dict[Key, float]
+    pairs: dict[int, list[tuple[Key, Key]]]
+    regular: dict[int, bool]
+    spans: dict[Key, int] = field(default_factory=dict)
+
+    def sides(self, label: int) -> list[PiecewiseBezier]:
+        """The segment's sides as a head-to-tail loop (edges reversed where needed)."""
+        ids = self.loops[label]
+        out = []
+        for k in range(len(ids)):
+            a, b = ids[k], ids[(k + 1) % len(ids)]
+            curve = self.curves[(min(a, b), max(a, b))]
+            out.append(curve if a < b else curve.reversed())
+        return out
+
+
+def key_of(a: int, b: int) -> Key:
+    """Sorted corner-id pair naming an edge."""
+    return (min(a, b), max(a, b))
+
+
+# --------------------------------------------------------------------------- topology
+def _filter_corners(
+    layout: Layout, tree: cKDTree, labels: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], dict[int, list[int]]]:
+    """Drop border kinks (two segments, no open boundary near); renumber the corners."""
+    reach = CLUSTER_FACTOR * layout.radius
+    opened = [b for b in layout.open_boundary.values() if len(b)]
+    open_tree = cKDTree(np.vstack(opened)) if opened else None
+    keep = []
+    for i, corner in enumerate(layout.corners):
+        near = tree.query_ball_point(corner, reach)
+        n_labels = len(np.unique(labels[near]))
+        # Several open-boundary points: a single one can be a border point whose neighbours
+        # happen to share its label (random sampling), not the open boundary.
+        near_open = open_tree is not None and len(open_tree.query_ball_point(corner, reach)) >= 3
+        keep.append(n_labels >= 3 or near_open or n_labels == 1)
+    keep_ids = np.flatnonzero(keep)
+    new_id = {int(old): new for new, old in enumerate(keep_ids)}
+    seg = {
+        int(label): [new_id[int(c)] for c in ids if int(c) in new_id]
+        for label, ids in layout.segment_corners.items()
+    }
+    return layout.corners[keep_ids].copy(), seg
+
+
+def _open_runs(
+    boundary: NDArray[np.float64], corner_xyz: NDArray[np.float64], corner_ids: list[int],
+    gap: float,
+) -> list[tuple[int, int, NDArray[np.float64]]]:
+    """Runs of a segment's open-boundary loop between consecutive corners near it."""
+    if len(boundary) < 2:
+        return []
+    dist, where = cKDTree(boundary).query(corner_xyz)
+    near = dist <= gap
+    if near.sum() < 2:
+        return []
+    ids = np.asarray(corner_ids)[near]
+    at = where[near]
+    order = np.argsort(at)
+    ids, at = ids[order], at[order]
+    step = np.linalg.norm(np.diff(np.vstack([boundary, boundary[:1]]), axis=0), axis=1)
+    runs = []
+    n = len(boundary)
+    for k in range(len(ids)):
+        i0, i1 = int(at[k]), int(at[(k + 1) % len(ids)])
+        if ids[k] == ids[(k + 1) % len(ids)]:
+            continue
+        idx = np.arange(i0, i1 + 1) if i1 > i0 else np.r_[np.arange(i0, n), np.arange(0, i1 + 1)]
+        # A run crossing a border (points removed from the loop) jumps: not an open edge.
+        if len(idx) >= 3 and step[idx[:-1]].max() <= gap:
+            runs.append((int(ids[k]), int(ids[(k + 1) % len(ids)]), boundary[idx]))
+    return runs
+
+
+def _cycle(label: int, corner_ids: list[int], edges: list[Key]) -> list[int]:
+    """Order a segment's corners along its edges; the edges must form one cycle."""
+    count = len(corner_ids)
+    if len(edges) != count:
+        raise InputError(
+            f"segment {label}: found {len(edges)} edges for its {count} corners "
+            f"{sorted(corner_ids)} (edges {sorted(edges)}); each side must be a border with one "
+            "neighbour or a run of the open boundary — check that the segment does not touch a "
+            "neighbour along two separate borders and that its corners are not merged"
+        )
+    nxt: dict[int, list[int]] = {c: [] for c in corner_ids}
+    for a, b in edges:
+        if a not in nxt or b not in nxt:
+            raise InputError(f"segment {label}: edge {(a, b)} ends at a corner it does not have")
+        nxt[a].append(b)
+        nxt[b].append(a)
+    if any(len(v) != 2 for v in nxt.values()):
+        raise InputError(
+            f"segment {label}: its sides do not close into one loop (corner degrees "
+            f"{ {c: len(v) for c, v in nxt.items()} }); the segment is probably not 3- or 4-sided"
+        )
+    loop = [corner_ids[0]]
+    prev = -1
+    while len(loop) < count:
+        here = loop[-1]
+        step = nxt[here][0] if nxt[here][0] != prev else nxt[here][1]
+        prev = here
+        loop.append(step)
+    if len(set(loop)) != count:
+        raise InputError(f"segment {label}: its sides form more than one loop")
+    return loop
+
+
+# --------------------------------------------------------------------------- curve fitting
+def _knots(spans: int) -> NDArray[np.float64]:
+    return np.r_[[0.0] * 3, np.linspace(0.0, 1.0, spans + 1), [1.0] * 3]
+
+
+def _design(t: NDArray[np.float64], spans: int) -> NDArray[np.float64]:
+    return BSpline.design_matrix(np.clip(t, 0.0, 1.0), _knots(spans), 3).toarray()
+
+
+def _project(spline: BSpline, points: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Closest parameters in [0, 1] of ``points`` on ``spline``, from dense samples + Newton."""
+    grid = np.linspace(0.0, 1.0, 1025)
+    _, idx = cKDTree(spline(grid)).query(points)
+    t = grid[idx]
+    d1, d2 = spline.derivative(1), spline.derivative(2)
+    for _ in range(2):
+        r = spline(t) - points
+        g = d1(t)
+        step = np.einsum("ij,ij->i", r, g) / np.maximum(
+            np.einsum("ij,ij->i", g, g) + np.einsum("ij,ij->i", r, d2(t)), 1e-300
+        )
+        t = np.clip(t - step, 0.0, 1.0)
+    return t
+
+
+def _free_fit(
+    data: NDArray[np.float64], t: NDArray[np.float64], spans: int
+) -> tuple[BSpline, NDArray[np.float64], float]:
+    """Least-squares spline with free ends; returns it, the parameters and the RSS."""
+    for _ in range(REPARAM_ROUNDS):
+        basis = _design(t, spans)
+        ctrl = np.linalg.lstsq(basis, data, rcond=None)[0]
+        spline = BSpline(_knots(spans), ctrl, 3)
+        t = _project(spline, data, t)
+    rss = float(((spline(t) - data) ** 2).sum())
+    return spline, t, rss
+
+
+def _choose_spans(data: NDArray[np.float64], t: NDArray[np.float64]) -> tuple[int, BSpline, NDArray[np.float64]]:
+    """Span count by the Bayesian information criterion over ``SPAN_CHOICES``."""
+    n = 3 * len(data)
+    best = None
+    for spans in SPAN_CHOICES:
+        if spans > 1 and len(data) < POINTS_PER_SPAN * spans:
+            break
+        spline, tt, rss = _free_fit(data, t.copy(), spans)
+        bic = n * np.log(max(rss, 1e-300) / n) + 3 * (spans + 3) * np.log(n)
+        if best is None or bic < best[0]:
+            best = (bic, spans, spline, tt)
+    assert best is not None
+    return best[1], best[2], best[3]
+
+
+def _quadric(
+    points: NDArray[np.float64], centre: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Project ``centre`` onto a quadric height field fitted to ``points``; return it and the
+    unit normal there. ``None`` when the points do not determine the quadric."""
+    if len(points) < 12:
+        return None
+    origin = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - origin, full_matrices=False)
+    local = (points - origin) @ vt.T
+    x, y, z = local.T
+    design = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    coef, *_ = np.linalg.lstsq(design, z, rcond=None)
+    cx, cy, _ = (centre - origin) @ vt.T
+    cz = coef @ [1.0, cx, cy, cx * cx, cx * cy, cy * cy]
+    fx = coef[1] + 2 * coef[3] * cx + coef[4] * cy
+    fy = coef[2] + coef[4] * cx + 2 * coef[5] * cy
+    normal = np.array([-fx, -fy, 1.0]) @ vt
+    return np.array([cx, cy, cz]) @ vt + origin, normal / np.linalg.norm(normal)
+
+
+def mls_project(
+    queries: NDArray[np.float64], cloud: NDArray[np.float64], tree: cKDTree, k: int = MLS_NEIGHBOURS
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Project points onto the cloud's surface: a quadric height field over each query's ``k``
+    nearest cloud points (in their PCA frame), evaluated below the query. Batched, no loops.
+
+    Returns the projected points (Q, 3) and unit normals (Q, 3) (orientation arbitrary).
+    """
+    k = min(k, len(cloud))
+    _, idx = tree.query(queries, k=k)
+    hood = cloud[idx]  # (Q, k, 3)
+    origin = hood.mean(axis=1)
+    centred = hood - origin[:, None]
+    _, vecs = np.linalg.eigh(np.einsum("qki,qkj->qij", centred, centred))
+    frame = vecs[:, :, ::-1].transpose(0, 2, 1)  # rows: major, minor, normal
+    local = np.einsum("qki,qji->qkj", centred, frame)
+    x, y, z = local[..., 0], local[..., 1], local[..., 2]
+    design = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)  # (Q, k, 6)
+    # Scale columns to the neighbourhood size so the 6 x 6 normal equations stay well posed.
+    h = np.sqrt((x * x + y * y).mean(axis=1))[:, None]
+    powers = np.array([0, 1, 1, 2, 2, 2])
+    design = design / h[..., None] ** powers
+    gram = np.einsum("qki,qkj->qij", design, design) + 1e-10 * np.eye(6)
+    coef = np.linalg.solve(gram, np.einsum("qki,qk->qi", design, z)[..., None])[..., 0]
+    coef = coef / h**powers
+    q = np.einsum("qi,qji->qj", queries - origin, frame)
+    cx, cy = q[:, 0], q[:, 1]
+    cz = coef[:, 0] + coef[:, 1] * cx + coef[:, 2] * cy + coef[:, 3] * cx * cx
+    cz += coef[:, 4] * cx * cy + coef[:, 5] * cy * cy
+    fx = coef[:, 1] + 2 * coef[:, 3] * cx + coef[:, 4] * cy
+    fy = coef[:, 2] + coef[:, 4] * cx + 2 * coef[:, 5] * cy
+    normal = np.einsum("qj,qji->qi", np.stack([-fx, -fy, np.ones_like(fx)], 1), frame)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    projected = np.einsum("qj,qji->qi", np.stack([cx, cy, cz], 1), frame) + origin
+    return projected, normal
+
+
+def _line_point(
+    points: list[NDArray[np.float64]], dirs: list[NDArray[np.float64]], guess: NDArray[np.float64],
+    weight: float,
+) -> NDArray[np.float64]:
+    """Least-squares meeting point of lines ``points[i] + s dirs[i]``, pulled to ``guess``."""
+    a = weight * np.eye(3)
+    b = weight * guess
+    for p, d in zip(points, dirs):
+        d = d / np.linalg.norm(d)
+        proj = np.eye(3) - np.outer(d, d)
+        a += proj
+        b += proj @ p
+    return np.linalg.solve(a, b)
+
+
+# --------------------------------------------------------------------------- main
+def build_edges(
+    points: NDArray[np.float64],
+    labels: NDArray[np.int64],
+    layout: Layout,
+    tree: cKDTree | None = None,
+) -> EdgeNetwork:
+    """Refined corners, side loops and one fitted curve per edge of a segmented cloud.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    labels : (N,) int
+    layout : Layout
+        From :func:`~pde2cad.layout.adjacency.build_layout` on the same points
+        (``check=False`` is fine: border kinks are dropped here, then every segment must
+        have 3 or 4 corners).
+    tree : cKDTree, optional
+        Of ``points`` (built when omitted).
+
+    Returns
+    -------
+    EdgeNetwork
+
+    Raises
+    ------
+    InputError
+        A segment without 3 or 4 corners, two neighbours sharing other than two corners,
+        sides that do not form one loop (each message names the segment).
+    """
+    pts = np.asarray(points, dtype=float)
+    lab = np.asarray(labels).astype(np.int64)
+    tree = cKDTree(pts) if tree is None else tree
+    radius, spacing = layout.radius, layout.spacing
+    corners, seg_corners = _filter_corners(layout, tree, lab)
+    for label, ids in seg_corners.items():
+        if len(ids) not in (3, 4):
+            raise InputError(
+                f"segment {label} has {len(ids)} corners; a patch needs 3 or 4 — split or "
+                "merge segments so each is a 3- or 4-sided region"
+            )
+
+    # Topology: shared edges from common corners, open edges from open-boundary runs.
+    data: dict[Key, NDArray[np.float64]] = {}
+    users: dict[Key, list[int]] = {}
+    seg_edges: dict[int, list[Key]] = {label: [] for label in seg_corners}
+    for (a, b), border in layout.borders.items():
+        common = sorted(set(seg_corners[a]) & set(seg_corners[b]))
+        if len(common) != 2:
+            raise InputError(
+                f"segments {a} and {b} touch but share {len(common)} corners (need the 2 ends "
+                "of their common edge); a segment pair meeting along two borders, or a border "
+                "ending without a corner, cannot become patches — split one of them"
+            )
+        key = key_of(*common)
+        if key in users:
+            raise InputError(
+                f"segments {users[key]} and {[a, b]} all claim the edge between corners {key}; "
+                "check the segmentation near that edge"
+            )
+        _, idx = tree.query(border)
+        side_a = border[lab[idx] == a]
+        side_b = border[lab[idx] == b]
+        if len(side_a) < 2 or len(side_b) < 2:
+            raise InputError(f"segments {a} and {b}: border too thin to fit an edge")
+        d_ab, j = cKDTree(side_b).query(side_a)
+        d_ba, i = cKDTree(side_a).query(side_b)
+        mids = np.vstack([
+            (side_a + side_b[j])[d_ab <= PAIR_REACH * spacing] / 2,
+            (side_b + side_a[i])[d_ba <= PAIR_REACH * spacing] / 2,
+        ])
+        data[key] = mids
+        users[key] = [a, b]
+        seg_edges[a].append(key)
+        seg_edges[b].append(key)
+    gap = CLUSTER_FACTOR * radius
+    for label, ids in seg_corners.items():
+        boundary = layout.open_boundary.get(label, np.zeros((0, 3)))
+        for c0, c1, run in _open_runs(boundary, corners[ids], ids, gap):
+            key = key_of(c0, c1)
+            if key in users:
+                continue
+            data[key] = run if c0 < c1 else run[::-1]
+            users[key] = [label]
+            seg_edges[label].append(key)
+    loops = {label: _cycle(label, seg_corners[label], seg_edges[label]) for label in seg_corners}
+    loops = _orient(loops, users, corners)
+
+    # Free fits per edge (span count, end tangent lines), on data away from the corners.
+    at_corner: dict[int, list[tuple[Key, int]]] = {c: [] for c in range(len(corners))}
+    spans: dict[Key, int] = {}
+    params: dict[Key, NDArray[np.float64]] = {}
+    ends: dict[tuple[Key, int], tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+    for key, pts_e in data.items():
+        p0, p1 = corners[key[0]], corners[key[1]]
+        chord = p1 - p0
+        t = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+        trim = (np.linalg.norm(pts_e - p0, axis=1) > END_TRIM * radius) & (
+            np.linalg.norm(pts_e - p1, axis=1) > END_TRIM * radius
+        )
+        if trim.sum() < 8:
+            trim[:] = True
+        if len(pts_e) < 4:
+            raise InputError(f"edge between corners {key} has only {len(pts_e)} points to fit")
+        n, spline, tt = _choose_spans(pts_e[trim], t[trim])
+        spans[key] = n
+        for end, s in ((0, 0.0), (1, 1.0)):
+            ends[(key, end)] = (spline(s), spline.derivative(1)(s))
+            at_corner[key[end]].append((key, end))
+
+    # Corner refinement: meeting point of the end tangent lines, onto a local quadric.
+    normals = np.zeros_like(corners)
+    for c, incident in at_corner.items():
+        guess = corners[c]
+        lines = [ends[e] for e in incident]
+        moved = _line_point([p for p, _ in lines], [d for _, d in lines], guess, 0.05 * len(lines))
+        if np.linalg.norm(moved - guess) > MAX_CORNER_MOVE * radius:
+            moved = guess
+        near = pts[tree.query_ball_point(moved, max(QUADRIC_RADIUS * radius, 4 * spacing))]
+        fit = _quadric(near, moved)
+        if fit is not None and np.linalg.norm(fit[0] - guess) <= MAX_CORNER_MOVE * radius:
+            corners[c], normals[c] = fit
+        else:
+            corners[c] = moved
+            normals[c] = np.linalg.svd(near - near.mean(axis=0))[2][-1] if len(near) >= 3 else [0, 0, 1]
+
+    away = {
+        (key[end], key): (1.0 if end == 0 else -1.0) * ends[(key, end)][1] for key, end in ends
+    }
+    pairs, regular = _pairs(loops, users, len(corners), away)
+    for key, pts_e in data.items():
+        p0, p1 = corners[key[0]], corners[key[1]]
+        chord = p1 - p0
+        params[key] = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+    splines = _joint_fit(data, params, spans, corners, normals, pairs)
+    # The midline fixes where an edge runs ALONG the surface; its height above the surface is
+    # better taken from the whole cloud: project samples of each edge onto a local quadric
+    # and refit them (noise-free samples afford more spans).
+    final = {key: max(spans[key], MIN_FINAL_SPANS) for key in data}
+    samples, sample_t = {}, {}
+    for key, spline in splines.items():
+        t = np.linspace(0.0, 1.0, SAMPLES_PER_SPAN * final[key] + 1)[1:-1]
+        samples[key], sample_t[key] = spline(t), t
+    flat = np.vstack(list(samples.values()))
+    projected, _ = mls_project(flat, pts, tree)
+    start = 0
+    for key in data:
+        count = len(samples[key])
+        samples[key] = projected[start : start + count]
+        start += count
+    splines = _joint_fit(samples, sample_t, final, corners, normals, pairs)
+    curves, errors, rms = {}, {}, {}
+    for key, spline in splines.items():
+        t = _project(spline, data[key], params[key])
+        dist = np.linalg.norm(spline(t) - data[key], axis=1)
+        errors[key], rms[key] = float(dist.max()), float(np.sqrt((dist**2).mean()))
+        curves[key] = _to_bezier(spline, final[key], corners[key[0]], corners[key[1]])
+    return EdgeNetwork(corners, normals, loops, curves, users, errors, rms, pairs, regular, final)
+
+
+def _orient(
+    loops: dict[int, list[int]], users: dict[Key, list[int]], corners: NDArray[np.float64]
+) -> dict[int, list[int]]:
+    """Orient the side loops consistently (neighbours run their shared edge in opposite
+    directions, so all patch normals point to one side); on a closed surface, outwards."""
+
+    def runs(label: int, a: int, b: int) -> bool:
+        ids = loops[label]
+        i = ids.index(a)
+        return ids[(i + 1) % len(ids)] == b
+
+    done: set[int] = set()
+    for seed in sorted(loops):
+        if seed in done:
+            continue
+        done.add(seed)
+        stack = [seed]
+        while stack:
+            label = stack.pop()
+            ids = loops[label]
+            for k in range(len(ids)):
+                a, b = ids[k], ids[(k + 1) % len(ids)]
+                for other in users[key_of(a, b)]:
+                    if other in done:
+                        continue
+                    if runs(other, a, b):
+                        loops[other] = loops[other][::-1]
+                    done.add(other)
+                    stack.append(other)
+    # Divergence theorem on the corner polygons: sum of centroid . vector area ~ 3 x volume.
+    flux = 0.0
+    for ids in loops.values():
+        ring = corners[ids]
+        area = 0.5 * np.cross(ring, np.roll(ring, -1, axis=0)).sum(axis=0)
+        flux += float(ring.mean(axis=0) @ area)
+    if flux < 0:
+        loops = {label: ids[::-1] for label, ids in loops.items()}
+    return loops
+
+
+def _pairs(
+    loops: dict[int, list[int]],
+    users: dict[Key, list[int]],
+    n_corners: int,
+    away: dict[tuple[int, Key], NDArray[np.float64]],
+) -> tuple[dict[int, list[tuple[Key, Key]]], dict[int, bool]]:
+    """Edges paired across each corner: for a shared edge, the two patches' other edges,
+    when they run on smoothly through the corner (a crease keeps its kink)."""
+    other: dict[tuple[int, int], dict[Key, Key]] = {}
+    for label, ids in loops.items():
+        c = len(ids)
+        for k in range(c):
+            prev_key = key_of(ids[k - 1], ids[k])
+            next_key = key_of(ids[k], ids[(k + 1) % c])
+            other[(label, ids[k])] = {prev_key: next_key, next_key: prev_key}
+    pairs: dict[int, list[tuple[Key, Key]]] = {c: [] for c in range(n_corners)}
+    regular: dict[int, bool] = {}
+    for key, who in users.items():
+        if len(who) != 2:
+            continue
+        for corner in key:
+            ea = other[(who[0], corner)][key]
+            eb = other[(who[1], corner)][key]
+            pair = (min(ea, eb), max(ea, eb))
+            da, db = away[(corner, ea)], away[(corner, eb)]
+            cos = -float(da @ db) / max(float(np.linalg.norm(da) * np.linalg.norm(db)), 1e-300)
+            if ea != eb and pair not in pairs[corner] and cos >= np.cos(np.radians(PAIR_ANGLE)):
+                pairs[corner].append(pair)
+    for corner, plist in pairs.items():
+        seen = [e for p in plist for e in p]
+        regular[corner] = len(seen) == len(set(seen))
+    return pairs, regular
+
+
+def _joint_fit(
+    data: dict[Key, NDArray[np.float64]],
+    params: dict[Key, NDArray[np.float64]],
+    spans: dict[Key, int],
+    corners: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    pairs: dict[int, list[tuple[Key, Key]]],
+) -> dict[Key, BSpline]:
+    """All edges at once: ends on the corners, end legs in the corner's tangent plane, paired
+    edges with equal and opposite end derivatives (at regular corners)."""
+    # Tangent-plane basis per corner.
+    basis = {}
+    for c, n in enumerate(normals):
+        helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+        t1 = np.cross(n, helper)
+        t1 /= np.linalg.norm(t1)
+        basis[c] = np.stack([t1, np.cross(n, t1)])
+    # Leg unknowns: one 2-vector per (corner, edge end), shared (with a sign) by a pair.
+    leg_var: dict[tuple[int, Key], tuple[int, float]] = {}
+    n_var = 0
+    for c, plist in pairs.items():
+        seen = [e for p in plist for e in p]
+        if len(seen) != len(set(seen)):
+            continue  # irregular corner: no pairing
+        for ea, eb in plist:
+            leg_var[(c, ea)] = (n_var, 1.0)
+            leg_var[(c, eb)] = (n_var, -1.0)
+            n_var += 2
+    offsets: dict[Key, int] = {}
+    for key in data:
+        for c in key:
+            if (c, key) not in leg_var:
+                leg_var[(c, key)] = (n_var, 1.0)
+                n_var += 2
+    for key in data:
+        offsets[key] = n_var
+        n_var += 3 * (spans[key] - 1)
+
+    splines: dict[Key, BSpline] = {}
+    for _ in range(REPARAM_ROUNDS):
+        rows, cols, vals, rhs = [], [], [], []
+        row0 = 0
+        for key, pts_e in data.items():
+            s = spans[key]
+            b = _design(params[key], s)  # (K, s + 3)
+            k = len(pts_e)
+            p0, p1 = corners[key[0]], corners[key[1]]
+            target = pts_e - np.outer(b[:, 0], p0) - np.outer(b[:, -1], p1)
+            target -= np.outer(b[:, 1], p0) + np.outer(b[:, -2], p1)
+            # Legs: P1 = p0 + sign/(3 s) G t, the derivative away from the corner being G t
+            # (dP/dt = 3 s (P1 - P0) on a uniform clamped cubic with s spans).
+            for col, c in ((1, key[0]), (s + 1, key[1])):
+                var, sign = leg_var[(c, key)]
+                scale = sign / (3.0 * s)
+                for d in range(3):
+                    for j in range(2):
+                        rows.append(row0 + d * k + np.arange(k))
+                        cols.append(np.full(k, var + j))
+                        vals.append(b[:, col] * scale * basis[c][j, d])
+            for i in range(s - 1):
+                for d in range(3):
+                    rows.append(row0 + d * k + np.arange(k))
+                    cols.append(np.full(k, offsets[key] + 3 * i + d))
+                    vals.append(b[:, 2 + i])
+            rhs.append(target.T.reshape(-1))
+            row0 += 3 * k
+        a = coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(row0, n_var)
+        ).tocsr()
+        normal = (a.T @ a).tocsc()
+        scale = max(float(normal.diagonal().max()), 1e-300)
+        z = spsolve(normal + RIDGE * scale * identity(n_var, format="csc"), a.T @ np.concatenate(rhs))
+        for key, pts_e in data.items():
+            s = spans[key]
+            ctrl = np.zeros((s + 3, 3))
+            p0, p1 = corners[key[0]], corners[key[1]]
+            ctrl[0], ctrl[-1] = p0, p1
+            for col, c, p in ((1, key[0], p0), (s + 1, key[1], p1)):
+                var, sign = leg_var[(c, key)]
+                ctrl[col] = p + sign / (3.0 * s) * (z[var : var + 2] @ basis[c])
+            if s > 1:
+                ctrl[2 : s + 1] = z[offsets[key] : offsets[key] + 3 * (s - 1)].reshape(-1, 3)
+            splines[key] = BSpline(_knots(s), ctrl, 3)
+            params[key] = _project(splines[key], pts_e, params[key])
+    return splines
+
+
+def _to_bezier(
+    spline: BSpline, spans: int, start: NDArray[np.float64], end: NDArray[np.float64]
+) -> PiecewiseBezier:
+    """Exact Bézier pieces of a uniform clamped cubic spline, ends set bitwise to the corners."""
+    breaks = np.linspace(0.0, 1.0, spans + 1)
+    values = spline(breaks)
+    values[0], values[-1] = start, end
+    d = spline.derivative(1)
+    h = 1.0 / spans
+    left, right = d(breaks[:-1]), d(breaks[1:])  # a C2 spline: one derivative per break
+    ctrl = np.stack([values[:-1], values[:-1] + h / 3 * left, values[1:] - h / 3 * right, values[1:]], 1)
+    return PiecewiseBezier(ctrl, breaks)
+
+
+__all__ = ["EdgeNetwork", "build_edges", "key_of"]
