@@ -30,6 +30,7 @@ from pde2cad.bspline.data import BSplineSurface
 from pde2cad.errors import FitError, InputError
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
+from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Patch, fit_patch
 
@@ -168,11 +169,14 @@ def reconstruct(
     t0 = time.perf_counter()
     patches: dict[int, Patch] = {}
     order = sorted(network.loops)
+    seg_points = {label: pts[lab == label] for label in order}
+    ribbons = shared_ribbons(network, seg_points) if continuity == "c1" else {}
     for done, label in enumerate(order):
         _report(progress, "patches", done, len(order))
+        rib = ribbons.get(label)
         patches[label] = fit_patch(
-            pts[lab == label], continuity="c0", m=m, n=n, tolerance=tolerance,
-            boundary=network.sides(label),
+            seg_points[label], continuity="c1" if rib is not None else "c0", m=m, n=n,
+            tolerance=tolerance, boundary=network.sides(label), ribbons=rib,
         )
     _report(progress, "patches", len(order), len(order))
     timings["patches"] = time.perf_counter() - t0

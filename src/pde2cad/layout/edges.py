@@ -56,12 +56,16 @@ REPARAM_ROUNDS = 3
 #: Border data closer than this many neighbour radii to a rough corner is ignored by the
 #: free fits (near a junction the midline of one pair is disturbed by the third segment).
 END_TRIM = 1.0
+#: End tangent lines come from the edge data within max(END_REACH x radius,
+#: END_SHARE x chord) of the corner.
+END_REACH = 6.0
+END_SHARE = 0.1
 #: Corners move at most this many neighbour radii in the refinement.
 MAX_CORNER_MOVE = 3.0
 #: Quadric fitted to the cloud within this many neighbour radii of a corner.
 QUADRIC_RADIUS = 3.0
 #: Edges through a corner are paired when their free fits turn by less than this (degrees).
-PAIR_ANGLE = 25.0
+PAIR_ANGLE = 60.0
 #: Border points are paired with the nearest point across the border when it lies within
 #: this many spacings; their midpoints trace the border. A point deeper in the band pairs with
 #: a point near the border's foot and its midpoint sits half its depth off the border.
@@ -329,6 +333,35 @@ def mls_project(
     return projected, normal
 
 
+def _end_line(
+    data: NDArray[np.float64], corner: NDArray[np.float64], other: NDArray[np.float64],
+    radius: float, length: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Tangent line of the edge data at one end: (point, unit direction away from the corner).
+
+    A quadratic in the principal-axis coordinate is fitted to the data near the end and
+    evaluated at the corner's coordinate, so a curved edge does not tilt the line (a chord
+    over the same data would, by half the turn)."""
+    dist = np.linalg.norm(data - corner, axis=1)
+    reach = max(END_REACH * radius, END_SHARE * length)
+    near = data[dist <= reach]
+    if len(near) < 6:
+        near = data[np.argsort(dist)[: min(len(data), 12)]]
+    centre = near.mean(axis=0)
+    axis = np.linalg.svd(near - centre, full_matrices=False)[2][0]
+    s = (near - centre) @ axis
+    s0 = float((corner - centre) @ axis)
+    design = np.column_stack([np.ones_like(s), s, s * s])
+    coef = np.linalg.lstsq(design, near, rcond=None)[0]
+    point = coef[0] + coef[1] * s0 + coef[2] * s0 * s0
+    direction = coef[1] + 2 * coef[2] * s0
+    direction = direction / np.linalg.norm(direction)
+    # Oriented towards the edge's other corner (the data near the end may straddle it).
+    if direction @ (other - corner) < 0:
+        direction = -direction
+    return point, direction
+
+
 def _line_point(
     points: list[NDArray[np.float64]], dirs: list[NDArray[np.float64]], guess: NDArray[np.float64],
     weight: float,
@@ -448,10 +481,13 @@ def build_edges(
             trim[:] = True
         if len(pts_e) < 4:
             raise InputError(f"edge between corners {key} has only {len(pts_e)} points to fit")
-        n, spline, tt = _choose_spans(pts_e[trim], t[trim])
+        n, _, _ = _choose_spans(pts_e[trim], t[trim])
         spans[key] = n
-        for end, s in ((0, 0.0), (1, 1.0)):
-            ends[(key, end)] = (spline(s), spline.derivative(1)(s))
+        length = float(np.linalg.norm(chord))
+        for end in (0, 1):
+            ends[(key, end)] = _end_line(
+                pts_e[trim], corners[key[end]], corners[key[1 - end]], radius, length
+            )
             at_corner[key[end]].append((key, end))
 
     # Corner refinement: meeting point of the end tangent lines, onto a local quadric.
@@ -470,9 +506,7 @@ def build_edges(
             corners[c] = moved
             normals[c] = np.linalg.svd(near - near.mean(axis=0))[2][-1] if len(near) >= 3 else [0, 0, 1]
 
-    away = {
-        (key[end], key): (1.0 if end == 0 else -1.0) * ends[(key, end)][1] for key, end in ends
-    }
+    away = {(key[end], key): ends[(key, end)][1] for key, end in ends}
     pairs, regular = _pairs(loops, users, len(corners), away)
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
