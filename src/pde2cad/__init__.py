@@ -7,6 +7,9 @@ matplotlib) are imported only by the functions that use them.
 
 from __future__ import annotations
 
+import sys
+import types
+
 from pde2cad.errors import ExportError, FitError, InputError, Pde2CadError
 
 __version__ = "0.1.0"
@@ -19,6 +22,7 @@ __all__ = [
     "__version__",
     "fit_patch",
     "fit_pde_surface",
+    "reconstruct",
     "vectorize",
 ]
 
@@ -44,3 +48,38 @@ def fit_pde_surface(points, params=None, **options):  # noqa: ANN001, ANN201
     from pde2cad.surfaces.pde_closed_form import fit_pde_surface as _fit
 
     return _fit(points, params, **options)
+
+
+def reconstruct(points, labels, **options):  # noqa: ANN001, ANN201
+    """Reconstruct a segmented point cloud as sewn B-spline patches; see
+    :func:`pde2cad.reconstruct.reconstruct`."""
+    from pde2cad.reconstruct import reconstruct as _reconstruct
+
+    return _reconstruct(points, labels, **options)
+
+
+class _CallableModule(types.ModuleType):
+    """The submodule :mod:`pde2cad.reconstruct`, callable as its ``reconstruct`` function."""
+
+    def __call__(self, points, labels, **options):  # noqa: ANN001, ANN204
+        return self.reconstruct(points, labels, **options)
+
+
+class _Package(types.ModuleType):
+    """The package module: ``pde2cad.reconstruct`` stays callable once its submodule loads.
+
+    ``pde2cad.reconstruct`` names both the lazy function above and the submodule; importing
+    the submodule rebinds the package attribute to the module, and
+    ``pde2cad.reconstruct(points, labels)`` would then fail depending on import order. The
+    module is made callable instead (calling its ``reconstruct``), so the function call, the
+    submodule's attributes, ``import pde2cad.reconstruct as m`` and dotted-path patching
+    (``mock.patch("pde2cad.reconstruct.reconstruct")``) all keep working.
+    """
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name == "reconstruct" and type(value) is types.ModuleType:
+            value.__class__ = _CallableModule
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
