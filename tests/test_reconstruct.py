@@ -81,3 +81,69 @@ def test_cube_closed_solid(tmp_path: Path) -> None:
     assert m["free_edges"] == 0 and m["shared_edges"] == 12
     assert m["max_gap"] <= 1e-7 * diagonal
     assert volume(shape) == pytest.approx(8.0, rel=0.01)
+
+
+# --------------------------------------------------------------------------- random clouds
+from pde2cad import samples  # noqa: E402
+
+
+def _true_errors(rec, cloud) -> NDArray[np.float64]:  # type: ignore[no-untyped-def]
+    """Distances of a 41 x 41 grid on every face to the true surface, over the diagonal."""
+    g = np.linspace(0.0, 1.0, 41)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    q = np.vstack([s.evaluate(u, v) for s in rec.surfaces.values()])
+    return cloud.distance(q) / cloud.diagonal
+
+
+def test_random_sheet_c1_is_tangent_continuous(tmp_path: Path) -> None:
+    cloud = samples.sheet(20000)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    m = measure(read_step(rec.write_step(tmp_path / "sheet.step")))
+    assert m["valid"] and m["shared_edges"] == 4 and m["free_edges"] == 8
+    assert m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= 0.05  # every interior corner joins four patches
+    err = _true_errors(rec, cloud)
+    assert err.mean() <= 1e-5 and err.max() <= 2e-4
+
+
+def test_random_cylinder_c1_open_boundary_corners(tmp_path: Path) -> None:
+    cloud = samples.cylinder(20000)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    m = measure(read_step(rec.write_step(tmp_path / "cyl.step")))
+    assert m["valid"] and m["n_faces"] == 8 and m["free_edges"] == 8
+    assert m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= 0.05
+    assert _true_errors(rec, cloud).mean() <= 1e-4
+
+
+def test_random_torus_c0_closed_and_accurate(tmp_path: Path) -> None:
+    cloud = samples.torus(20000)
+    rec = reconstruct(cloud.points, cloud.labels)
+    assert rec.sew_info.is_solid and rec.sew_info.valid
+    m = measure(read_step(rec.write_step(tmp_path / "torus.step")))
+    assert m["closed"] and m["free_edges"] == 0 and m["shared_edges"] == 32
+    assert m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert _true_errors(rec, cloud).mean() <= 1e-4
+    # The edge network: every corner joins four patches, each edge refitted on the surface.
+    assert all(len(ids) == 4 for ids in rec.network.loops.values())
+    assert len(rec.corners) == 16
+    assert cloud.distance(rec.corners).max() <= 2e-4 * cloud.diagonal
+
+
+def test_random_sphere6_solid_volume() -> None:
+    cloud = samples.sphere6(20000)
+    rec = reconstruct(cloud.points, cloud.labels)
+    assert rec.sew_info.is_solid and rec.sew_info.n_free_edges == 0
+    assert abs(volume(rec.shape) / cloud.volume - 1.0) <= 2e-3
+    assert _true_errors(rec, cloud).mean() <= 5e-4
+    # Three patches meet at each of the 8 corners: no pairing exists there.
+    assert not any(rec.network.regular.values())
+
+
+def test_noisy_torus_c1_no_folds(tmp_path: Path) -> None:
+    cloud = samples.torus(20000, noise=0.003)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    m = measure(read_step(rec.write_step(tmp_path / "torus.step")))
+    assert m["closed"] and m["valid"]
+    assert m["max_angle_deg"] <= 5.0
+    assert _true_errors(rec, cloud).mean() <= 1e-3  # noise is 3e-3 of the diagonal

@@ -594,21 +594,27 @@ def _pairs(
             next_key = key_of(ids[k], ids[(k + 1) % c])
             other[(label, ids[k])] = {prev_key: next_key, next_key: prev_key}
     pairs: dict[int, list[tuple[Key, Key]]] = {c: [] for c in range(n_corners)}
-    regular: dict[int, bool] = {}
+    wanted: dict[int, set[tuple[Key, Key]]] = {c: set() for c in range(n_corners)}
     for key, who in users.items():
         if len(who) != 2:
             continue
         for corner in key:
             ea = other[(who[0], corner)][key]
             eb = other[(who[1], corner)][key]
-            pair = (min(ea, eb), max(ea, eb))
+            if ea != eb:
+                wanted[corner].add((min(ea, eb), max(ea, eb)))
+    regular: dict[int, bool] = {}
+    for corner, candidates in wanted.items():
+        seen = [e for p in candidates for e in p]
+        # Each edge in at most one pair (even valence, or the open boundary) ...
+        ok = len(seen) == len(set(seen))
+        for ea, eb in sorted(candidates):
             da, db = away[(corner, ea)], away[(corner, eb)]
             cos = -float(da @ db) / max(float(np.linalg.norm(da) * np.linalg.norm(db)), 1e-300)
-            if ea != eb and pair not in pairs[corner] and cos >= np.cos(np.radians(PAIR_ANGLE)):
-                pairs[corner].append(pair)
-    for corner, plist in pairs.items():
-        seen = [e for p in plist for e in p]
-        regular[corner] = len(seen) == len(set(seen))
+            # ... and the paired edges run on smoothly (a crease keeps its kink).
+            if ok and cos >= np.cos(np.radians(PAIR_ANGLE)):
+                pairs[corner].append((ea, eb))
+        regular[corner] = ok and len(pairs[corner]) == len(candidates)
     return pairs, regular
 
 
