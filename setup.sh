@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Sets pde2cad up on a fresh Debian machine, then runs the main job on the bundled samples.
-#   ./setup.sh                 install everything, then vectorize examples/images -> out/
+#   ./setup.sh                 install everything, then reconstruct examples/clouds and
+#                              vectorize examples/images -> out/
 #   ./setup.sh --install-only  install only (used by test.sh and CI)
 # Installs: Debian packages (potrace for the benchmark peer, libusb-1.0-0 for open3d),
 # a virtual environment at .venv with pde2cad and all its optional groups.
 set -euo pipefail
 cd "$(dirname "$0")"
 
-APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1)
+# freecad-python3: FreeCAD 0.20 (headless) for the surface benchmark's peer and the workbench.
+APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1 freecad-python3)
 PYTHON=${PYTHON:-python3}
 # Debian's own python3 needs python3-venv for `python3 -m venv` (ensurepip).
 "$PYTHON" -c "import venv, ensurepip" 2>/dev/null || APT_PACKAGES+=(python3-venv)
@@ -21,7 +23,7 @@ if [ ${#missing[@]} -gt 0 ]; then
   [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   echo "setup: installing Debian packages: ${missing[*]}"
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
 if [ ! -x .venv/bin/python ]; then
@@ -37,8 +39,14 @@ if [ "${1:-}" = "--install-only" ]; then
   exit 0
 fi
 
-echo "setup: main job: vectorizing the sample images in examples/images -> out/"
 mkdir -p out
+echo "setup: main job: reconstructing the labelled sample clouds in examples/clouds -> out/ (STEP, IGES, report, preview)"
+for cloud in examples/clouds/*.ply; do
+  name=$(basename "$cloud" .ply)
+  .venv/bin/pde2cad reconstruct "$cloud" -o "out/$name.step" --iges "out/$name.igs" \
+    --continuity c1 --report "out/$name.json" --preview "out/$name.png"
+done
+echo "setup: vectorizing the sample images in examples/images -> out/"
 for img in examples/images/*.png; do
   name=$(basename "$img" .png)
   .venv/bin/pde2cad vectorize "$img" -o "out/$name.svg" -o "out/$name.dxf" --report "out/$name.json"

@@ -38,6 +38,9 @@ from pde2cad.surfaces.patch import Patch, fit_patch
 CAD_TOLERANCE = 1e-4
 #: Sewing tolerance relative to the diagonal (shared edges are identical curves).
 SEW_TOLERANCE = 1e-6
+#: With C1, a patch keeps its C0 fit when the C1 fit's mean error is above this multiple of
+#: the C0 one (the bicubic base went wrong, e.g. at degenerate corners).
+C1_ERROR_RATIO = 2.0
 #: Progress callback: ``progress(stage, done, total)``.
 Progress = Callable[[str, int, int], None]
 
@@ -79,6 +82,9 @@ class Reconstruction:
         Seconds per stage.
     network : EdgeNetwork
         Corners, side loops, edge curves and their fit errors.
+    c0_fallback : list of int
+        With ``continuity="c1"``: segments fitted C0 instead (3-sided, or whose C1 fit was
+        more than ``C1_ERROR_RATIO`` times worse); their edges are only positionally joined.
     """
 
     shape: Any
@@ -94,6 +100,7 @@ class Reconstruction:
     diagonal: float
     timings: dict[str, float] = field(default_factory=dict)
     network: EdgeNetwork | None = None
+    c0_fallback: list[int] = field(default_factory=list)
 
     def write_step(self, path: str | Path, units: str = "MM") -> Path:
         """Write the sewn shape to a STEP file."""
@@ -171,13 +178,30 @@ def reconstruct(
     order = sorted(network.loops)
     seg_points = {label: pts[lab == label] for label in order}
     ribbons = shared_ribbons(network, seg_points) if continuity == "c1" else {}
+    fallback: list[int] = [label for label in order if continuity == "c1" and label not in ribbons]
     for done, label in enumerate(order):
         _report(progress, "patches", done, len(order))
         rib = ribbons.get(label)
-        patches[label] = fit_patch(
-            seg_points[label], continuity="c1" if rib is not None else "c0", m=m, n=n,
-            tolerance=tolerance, boundary=network.sides(label), ribbons=rib,
+        c0 = fit_patch(
+            seg_points[label], continuity="c0", m=m, n=n, tolerance=tolerance,
+            boundary=network.sides(label),
         )
+        patches[label] = c0
+        if rib is not None:
+            try:
+                c1 = fit_patch(
+                    seg_points[label], continuity="c1", m=m, n=n, tolerance=tolerance,
+                    boundary=network.sides(label), ribbons=rib,
+                )
+            except FitError:
+                c1 = None
+            # A bicubic base can misbehave where a patch corner is degenerate (two sides
+            # tangent, as where a round bottom meets two wall seams): keep the C0 fit then,
+            # and say so in c0_fallback.
+            if c1 is not None and c1.errors["mean"] <= C1_ERROR_RATIO * c0.errors["mean"]:
+                patches[label] = c1
+            else:
+                fallback.append(label)
     _report(progress, "patches", len(order), len(order))
     timings["patches"] = time.perf_counter() - t0
 
@@ -204,6 +228,7 @@ def reconstruct(
         corners=network.corners,
         edge_errors=network.errors,
         network=network,
+        c0_fallback=fallback,
         diagonal=diagonal,
         timings=timings,
     )

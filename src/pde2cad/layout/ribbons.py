@@ -33,6 +33,9 @@ from pde2cad.surfaces.projection import project_points
 
 #: Hermite pieces per ribbon (a power of two: reversed breaks stay exact).
 PIECES = 4
+#: Edges where the two patches' own tangent planes differ by more than this (degrees) are
+#: creases: their ribbons are not shared.
+CREASE_ANGLE = 40.0
 #: Band of points per side used by the estimate, in parameter units.
 BAND = 0.2
 
@@ -132,6 +135,8 @@ def shared_ribbons(
         users = [u for u in who if u in four]
         if len(users) == 2 and len(who) == 2:
             (va, sa), (vb, sb) = in_t(users[0], key), in_t(users[1], key)
+            if _crease(network.curves[key], va, -vb):
+                continue  # a real crease: each side keeps its own ribbon (C0 there)
             shared[key] = ((va - vb) / 2, (sa - sb) / 2)
 
     # 3. Twist vector per corner (zero where the patch signs cannot alternate).
@@ -180,6 +185,19 @@ def shared_ribbons(
             inward.append((val, slope))
         out[label] = _to_ribbons(inward)
     return out
+
+
+def _crease(edge: PiecewiseBezier, cross_a: NDArray[np.float64], cross_b: NDArray[np.float64]) -> bool:
+    """Whether the two sides' own tangent planes along the edge differ by more than
+    ``CREASE_ANGLE`` at the interior nodes (the ends may be degenerate corners)."""
+    s = np.linspace(0.0, 1.0, PIECES + 1)[1:-1]
+    tangent = edge.derivative(s)
+    na = np.cross(tangent, cross_a[1:-1])
+    nb = np.cross(tangent, cross_b[1:-1])
+    cos = np.einsum("ij,ij->i", na, nb) / np.maximum(
+        np.linalg.norm(na, axis=1) * np.linalg.norm(nb, axis=1), 1e-300
+    )
+    return bool(np.any(cos < np.cos(np.radians(CREASE_ANGLE))))
 
 
 def _to_ribbons(inward: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> Ribbons:
