@@ -147,3 +147,26 @@ def test_noisy_torus_c1_no_folds(tmp_path: Path) -> None:
     assert m["closed"] and m["valid"]
     assert m["max_angle_deg"] <= 5.0
     assert _true_errors(rec, cloud).mean() <= 1e-3  # noise is 3e-3 of the diagonal
+
+
+def test_pot_c1_keeps_c0_at_degenerate_corners() -> None:
+    """The pot's flat bottom meets the wall seams at corners where its two sides are tangent
+    and the bottom-wall edge is a crease; patches whose C1 fit goes wrong keep their C0 fit,
+    so the error stays C0's."""
+    cloud = samples.pot(20000)
+    c0 = reconstruct(cloud.points, cloud.labels)
+    c1 = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert 0 < len(c1.c0_fallback) < 9
+    assert c1.sew_info.valid and c1.sew_info.n_free_edges == 4  # the open top rim
+    assert _true_errors(c1, cloud).mean() <= 1.5 * _true_errors(c0, cloud).mean()
+    assert _true_errors(c1, cloud).mean() <= 5e-4
+
+
+def test_progress_reports_every_patch() -> None:
+    cloud = samples.sheet(5000)
+    calls: list[tuple[str, int, int]] = []
+    reconstruct(cloud.points, cloud.labels, continuity="c1", progress=lambda *a: calls.append(a))
+    patch_calls = [c for c in calls if c[0] == "patches"]
+    assert patch_calls[-1] == ("patches", 8, 8)  # 4 C0 fits + 4 C1 fits
+    assert [c[1] for c in patch_calls] == list(range(9))
+    assert {c[0] for c in calls} == {"layout", "edges", "patches", "cad"}

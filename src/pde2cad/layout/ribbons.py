@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 
 from pde2cad.layout.edges import EdgeNetwork, Key, key_of
 from pde2cad.surfaces.boundary import PiecewiseBezier
-from pde2cad.surfaces.coons import BilinearCoons, Ribbons, estimate_cross_derivatives
-from pde2cad.surfaces.projection import project_points
+from pde2cad.surfaces.coons import Ribbons, estimate_cross_derivatives
+from pde2cad.surfaces.patch import Patch
 
 #: Hermite pieces per ribbon (a power of two: reversed breaks stay exact).
 PIECES = 4
@@ -87,16 +87,15 @@ def _corner_signs(
     return sign
 
 
-def shared_ribbons(
-    network: EdgeNetwork, segment_points: dict[int, NDArray[np.float64]]
-) -> dict[int, Ribbons]:
+def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[int, Ribbons]:
     """C1-compatible ribbons for every 4-sided segment of the network.
 
     Parameters
     ----------
     network : EdgeNetwork
-    segment_points : dict[int, (N, 3) float]
-        Each segment's points.
+    c0_patches : dict[int, Patch]
+        Each segment's C0 fit on the network's sides: its points, their parameters on the
+        bilinear Coons base and the outside flags are reused.
 
     Returns
     -------
@@ -107,10 +106,9 @@ def shared_ribbons(
     # 1. Each patch's own estimate, as inward node data per loop side.
     own: dict[int, list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = {}
     for label in sorted(four):
-        sides = network.sides(label)
-        bilinear = BilinearCoons.from_loop(*sides)
-        pts = segment_points[label]
-        params, _, outside = project_points(bilinear, pts)
+        patch = c0_patches[label]
+        bilinear = patch.base
+        pts, params, outside = patch.points, patch.params, patch.outside
         rib = estimate_cross_derivatives(
             pts[~outside], params[~outside], bilinear.bottom, bilinear.right, bilinear.top,
             bilinear.left, band=BAND, pieces=PIECES,
