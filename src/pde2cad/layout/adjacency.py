@@ -61,7 +61,10 @@ RADIUS_FACTOR = 1.25
 #: A pair of segments is adjacent when its border points span more than BORDER_SPAN x radius
 #: (segments touching at one point give border points within ~1 radius of it: span <= 2.9 r).
 BORDER_SPAN = 4.0
-#: Corner candidates closer than CLUSTER_FACTOR x radius form one corner.
+#: Corner candidates closer than CLUSTER_FACTOR x radius form one corner. Corners closer than
+#: BORDER_SPAN x radius are then merged too: no border that short counts as an edge, so they
+#: cannot be the two ends of one (sparse random samples split a four-way junction into two
+#: three-way ones joined by a stub of diagonal border).
 CLUSTER_FACTOR = 2.5
 #: A loop point is a sharp turn when the loop turns by at least this many degrees over
 #: +- perimeter / TURN_STEPS of arc length (a 90-degree corner turns 90, the corners of a
@@ -492,7 +495,7 @@ def build_layout(
             candidates.append(cand)
     cand = np.unique(np.concatenate(candidates))
 
-    corners = _cluster(pts, tree, cand, CLUSTER_FACTOR * radius)
+    corners = _cluster(pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius)
     segment_corners = _assign(tree, lab, present, corners, CLUSTER_FACTOR * radius)
     if check:
         for label, which in segment_corners.items():
@@ -515,17 +518,29 @@ def build_layout(
 
 
 def _cluster(
-    pts: NDArray[np.float64], tree: cKDTree, cand: NDArray[np.int64], dist: float
+    pts: NDArray[np.float64], tree: cKDTree, cand: NDArray[np.int64], dist: float,
+    merge: float = 0.0,
 ) -> NDArray[np.float64]:
-    """One corner per cluster of candidate points: the cloud point nearest the centroid."""
+    """One corner per cluster of candidate points (single linkage within ``dist``, then
+    clusters whose centroids lie within ``merge`` joined): the cloud point nearest the
+    centroid."""
     if not cand.size:
         return np.zeros((0, 3))
     pairs = cKDTree(pts[cand]).query_pairs(dist, output_type="ndarray")
     comp = _components(len(cand), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))
-    n = int(comp.max()) + 1
-    size = np.bincount(comp, minlength=n)
-    centroid = np.stack([np.bincount(comp, pts[cand, d], minlength=n) for d in range(3)], axis=1)
-    centroid /= size[:, None]
+
+    def centroids(comp: NDArray[np.int64]) -> NDArray[np.float64]:
+        n = int(comp.max()) + 1
+        size = np.bincount(comp, minlength=n)
+        sums = np.stack([np.bincount(comp, pts[cand, d], minlength=n) for d in range(3)], axis=1)
+        return sums / size[:, None]
+
+    centroid = centroids(comp)
+    if merge > dist and len(centroid) > 1:
+        close = cKDTree(centroid).query_pairs(merge, output_type="ndarray")
+        if len(close):
+            joined = _components(len(centroid), close[:, 0].astype(np.int64), close[:, 1].astype(np.int64))
+            centroid = centroids(joined[comp])
     _, nearest = tree.query(centroid)
     return pts[nearest]
 

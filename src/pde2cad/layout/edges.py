@@ -66,6 +66,10 @@ MAX_CORNER_MOVE = 3.0
 QUADRIC_RADIUS = 3.0
 #: Edges through a corner are paired when their free fits turn by less than this (degrees).
 PAIR_ANGLE = 60.0
+#: A corner is smooth when the normals at the corner of its segments' own local quadrics
+#: differ by less than this (degrees); its edges are then paired by topology alone (the end
+#: directions of the free fits can be wrong where four borders crowd together).
+SMOOTH_ANGLE = 40.0
 #: Border points are paired with the nearest point across the border when it lies within
 #: this many spacings; their midpoints trace the border. A point deeper in the band pairs with
 #: a point near the border's foot and its midpoint sits half its depth off the border.
@@ -507,7 +511,8 @@ def build_edges(
             normals[c] = np.linalg.svd(near - near.mean(axis=0))[2][-1] if len(near) >= 3 else [0, 0, 1]
 
     away = {(key[end], key): ends[(key, end)][1] for key, end in ends}
-    pairs, regular = _pairs(loops, users, len(corners), away)
+    smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users, max(QUADRIC_RADIUS * radius, 4 * spacing))
+    pairs, regular = _pairs(loops, users, len(corners), away, smooth)
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
@@ -583,9 +588,11 @@ def _pairs(
     users: dict[Key, list[int]],
     n_corners: int,
     away: dict[tuple[int, Key], NDArray[np.float64]],
+    smooth: dict[int, bool],
 ) -> tuple[dict[int, list[tuple[Key, Key]]], dict[int, bool]]:
     """Edges paired across each corner: for a shared edge, the two patches' other edges,
-    when they run on smoothly through the corner (a crease keeps its kink)."""
+    when the surface is smooth at the corner or they run on smoothly through it (a crease
+    keeps its kink)."""
     other: dict[tuple[int, int], dict[Key, Key]] = {}
     for label, ids in loops.items():
         c = len(ids)
@@ -612,10 +619,44 @@ def _pairs(
             da, db = away[(corner, ea)], away[(corner, eb)]
             cos = -float(da @ db) / max(float(np.linalg.norm(da) * np.linalg.norm(db)), 1e-300)
             # ... and the paired edges run on smoothly (a crease keeps its kink).
-            if ok and cos >= np.cos(np.radians(PAIR_ANGLE)):
+            if ok and (smooth.get(corner, False) or cos >= np.cos(np.radians(PAIR_ANGLE))):
                 pairs[corner].append((ea, eb))
         regular[corner] = ok and len(pairs[corner]) == len(candidates)
     return pairs, regular
+
+
+def _smooth_corners(
+    points: NDArray[np.float64],
+    labels: NDArray[np.int64],
+    tree: cKDTree,
+    corners: NDArray[np.float64],
+    at_corner: dict[int, list[tuple[Key, int]]],
+    users: dict[Key, list[int]],
+    reach: float,
+) -> dict[int, bool]:
+    """Whether the surface is smooth at each corner: the normals at the corner of quadrics
+    fitted to each incident segment's points within ``reach`` agree to ``SMOOTH_ANGLE`` (a
+    crease or a cone point makes them differ)."""
+    cos_min = np.cos(np.radians(SMOOTH_ANGLE))
+    out: dict[int, bool] = {}
+    for c, incident in at_corner.items():
+        segs = sorted({u for key, _ in incident for u in users[key]})
+        idx = np.asarray(tree.query_ball_point(corners[c], reach), dtype=np.int64)
+        normals = []
+        for label in segs:
+            near = points[idx[labels[idx] == label]]
+            if len(near) < 6:
+                break
+            # The segment's own quadric, evaluated AT the corner: plane normals of the
+            # sectors would differ by the curvature across the reach on a smooth surface.
+            fit = _quadric(near, corners[c])
+            normals.append(fit[1] if fit is not None else np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1])
+        else:
+            n = np.array(normals)
+            out[c] = bool(len(n) >= 2 and np.abs(n @ n.T).min() >= cos_min)
+            continue
+        out[c] = False
+    return out
 
 
 def _joint_fit(
