@@ -74,6 +74,15 @@ SMOOTH_ANGLE = 40.0
 #: this many spacings; their midpoints trace the border. A point deeper in the band pairs with
 #: a point near the border's foot and its midpoint sits half its depth off the border.
 PAIR_REACH = 2.5
+#: A shared edge is a crease when its two segments' own surfaces (local quadrics) meet at more
+#: than this angle (degrees) along it: its samples go onto their intersection, not onto one
+#: quadric fitted across both (which rounds the crease off).
+CREASE_ANGLE = 20.0
+#: Newton rounds of the projection onto the intersection of the segments' surfaces.
+CREASE_ROUNDS = 4
+#: Relative singular value below which two segments' tangent planes count as one (a smooth
+#: pair of segments at a crease corner constrains one direction, not two).
+PLANE_RCOND = 0.2
 #: Cloud neighbours of the quadric that projects edge samples onto the surface.
 MLS_NEIGHBOURS = 40
 #: Edge samples per span projected onto the surface for the final fit.
@@ -513,11 +522,21 @@ def build_edges(
     away = {(key[end], key): ends[(key, end)][1] for key, end in ends}
     smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users, max(QUADRIC_RADIUS * radius, 4 * spacing))
     pairs, regular = _pairs(loops, users, len(corners), away, smooth)
+    # At a crease corner the quadric over all segments rounds the corner off: put it on the
+    # intersection of the segments' own surfaces instead (nearest point to the estimate).
+    sheets = _Sheets(pts, lab)
+    for c, incident in at_corner.items():
+        if smooth.get(c, True):
+            continue
+        segs = sorted({u for key, _ in incident for u in users[key]})
+        moved = sheets.intersect(corners[c][None], segs)[0]
+        if np.linalg.norm(moved - corners[c]) <= MAX_CORNER_MOVE * radius:
+            corners[c] = moved
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
         params[key] = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
-    splines = _joint_fit(data, params, spans, corners, normals, pairs)
+    splines = _joint_fit(data, params, spans, corners, normals, pairs, smooth)
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is
     # better taken from the whole cloud: project samples of each edge onto a local quadric
     # and refit them (noise-free samples afford more spans).
@@ -531,9 +550,15 @@ def build_edges(
     start = 0
     for key in data:
         count = len(samples[key])
-        samples[key] = projected[start : start + count]
+        raw, samples[key] = samples[key], projected[start : start + count]
         start += count
-    splines = _joint_fit(samples, sample_t, final, corners, normals, pairs)
+        if len(users[key]) == 2 and not (smooth.get(key[0], True) and smooth.get(key[1], True)):
+            # An edge ending at a crease corner may be a crease itself: then its samples
+            # belong on the intersection of the two segments' surfaces.
+            segs = sorted(users[key])
+            if sheets.angle(raw, segs) > CREASE_ANGLE:
+                samples[key] = sheets.intersect(raw, segs)
+    splines = _joint_fit(samples, sample_t, final, corners, normals, pairs, smooth)
     curves, errors, rms = {}, {}, {}
     for key, spline in splines.items():
         t = _project(spline, data[key], params[key])
@@ -625,6 +650,41 @@ def _pairs(
     return pairs, regular
 
 
+class _Sheets:
+    """Each segment's own surface (its points' moving quadrics), for creases: where two
+    segments meet at an angle, the edge is where their surfaces intersect."""
+
+    def __init__(self, points: NDArray[np.float64], labels: NDArray[np.int64]) -> None:
+        self.points, self.labels = points, labels
+        self.cache: dict[int, tuple[NDArray[np.float64], cKDTree]] = {}
+
+    def project(self, q: NDArray[np.float64], label: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        if label not in self.cache:
+            own = self.points[self.labels == label]
+            self.cache[label] = (own, cKDTree(own))
+        own, tree = self.cache[label]
+        return mls_project(q, own, tree)
+
+    def angle(self, q: NDArray[np.float64], labels: list[int]) -> float:
+        """Median angle (degrees) between two segments' surface normals below ``q``."""
+        (_, na), (_, nb) = (self.project(q, label) for label in labels[:2])
+        cos = np.abs(np.einsum("ij,ij->i", na, nb))
+        return float(np.degrees(np.arccos(np.clip(np.median(cos), 0.0, 1.0))))
+
+    def intersect(self, q: NDArray[np.float64], labels: list[int]) -> NDArray[np.float64]:
+        """Points on every listed segment's surface nearest to ``q`` (Q, 3): Newton steps on
+        the tangent planes (min-norm step; near-parallel planes count as one)."""
+        x = np.array(q, dtype=float)
+        for _ in range(CREASE_ROUNDS):
+            fits = [self.project(x, label) for label in labels]
+            a = np.stack([n for _, n in fits], axis=1)  # (Q, k, 3)
+            r = np.stack([np.einsum("ij,ij->i", n, p - x) for p, n in fits], axis=1)  # (Q, k)
+            u, sv, vt = np.linalg.svd(a, full_matrices=False)
+            inv = np.where(sv > PLANE_RCOND * sv[:, :1], 1.0 / np.maximum(sv, 1e-300), 0.0)
+            x = x + np.einsum("qji,qj->qi", vt, inv * np.einsum("qkj,qk->qj", u, r))
+        return x
+
+
 def _smooth_corners(
     points: NDArray[np.float64],
     labels: NDArray[np.int64],
@@ -666,12 +726,17 @@ def _joint_fit(
     corners: NDArray[np.float64],
     normals: NDArray[np.float64],
     pairs: dict[int, list[tuple[Key, Key]]],
+    smooth: dict[int, bool] | None = None,
 ) -> dict[Key, BSpline]:
-    """All edges at once: ends on the corners, end legs in the corner's tangent plane, paired
-    edges with equal and opposite end derivatives (at regular corners)."""
-    # Tangent-plane basis per corner.
+    """All edges at once: ends on the corners, end legs in the corner's tangent plane (free
+    in 3D at a corner that is not smooth), paired edges with equal and opposite end
+    derivatives (at regular corners)."""
+    # Tangent-plane basis per corner (all of space where the surface has no tangent plane).
     basis = {}
     for c, n in enumerate(normals):
+        if smooth is not None and not smooth.get(c, True):
+            basis[c] = np.eye(3)
+            continue
         helper = np.eye(3)[int(np.argmin(np.abs(n)))]
         t1 = np.cross(n, helper)
         t1 /= np.linalg.norm(t1)
@@ -686,13 +751,13 @@ def _joint_fit(
         for ea, eb in plist:
             leg_var[(c, ea)] = (n_var, 1.0)
             leg_var[(c, eb)] = (n_var, -1.0)
-            n_var += 2
+            n_var += len(basis[c])
     offsets: dict[Key, int] = {}
     for key in data:
         for c in key:
             if (c, key) not in leg_var:
                 leg_var[(c, key)] = (n_var, 1.0)
-                n_var += 2
+                n_var += len(basis[c])
     for key in data:
         offsets[key] = n_var
         n_var += 3 * (spans[key] - 1)
@@ -714,7 +779,7 @@ def _joint_fit(
                 var, sign = leg_var[(c, key)]
                 scale = sign / (3.0 * s)
                 for d in range(3):
-                    for j in range(2):
+                    for j in range(len(basis[c])):
                         rows.append(row0 + d * k + np.arange(k))
                         cols.append(np.full(k, var + j))
                         vals.append(b[:, col] * scale * basis[c][j, d])
@@ -738,7 +803,7 @@ def _joint_fit(
             ctrl[0], ctrl[-1] = p0, p1
             for col, c, p in ((1, key[0], p0), (s + 1, key[1], p1)):
                 var, sign = leg_var[(c, key)]
-                ctrl[col] = p + sign / (3.0 * s) * (z[var : var + 2] @ basis[c])
+                ctrl[col] = p + sign / (3.0 * s) * (z[var : var + len(basis[c])] @ basis[c])
             if s > 1:
                 ctrl[2 : s + 1] = z[offsets[key] : offsets[key] + 3 * (s - 1)].reshape(-1, 3)
             splines[key] = BSpline(_knots(s), ctrl, 3)
