@@ -66,10 +66,14 @@ MAX_CORNER_MOVE = 3.0
 QUADRIC_RADIUS = 3.0
 #: Edges through a corner are paired when their free fits turn by less than this (degrees).
 PAIR_ANGLE = 60.0
-#: A corner is smooth when the normals at the corner of its segments' own local quadrics
-#: differ by less than this (degrees); its edges are then paired by topology alone (the end
-#: directions of the free fits can be wrong where four borders crowd together).
+#: A corner is smooth when its segments' own local quadrics give normals at the corner within
+#: SMOOTH_ANGLE degrees, or when one quadric over all its segments' nearby points leaves an RMS
+#: residual below SMOOTH_RATIO x that of a quadric per segment (or below SMOOTH_FLOOR x the
+#: reach: clean smooth data leave both near zero). Its edges are then paired by topology alone
+#: (the end directions of the free fits can be wrong where four borders crowd together).
 SMOOTH_ANGLE = 40.0
+SMOOTH_RATIO = 1.5
+SMOOTH_FLOOR = 0.01
 #: Border points are paired with the nearest point across the border when it lies within
 #: this many spacings; their midpoints trace the border. A point deeper in the band pairs with
 #: a point near the border's foot and its midpoint sits half its depth off the border.
@@ -274,8 +278,13 @@ def _free_fit(
 
 
 def _choose_spans(data: NDArray[np.float64], t: NDArray[np.float64]) -> tuple[int, BSpline, NDArray[np.float64]]:
-    """Span count by the Bayesian information criterion over ``SPAN_CHOICES``."""
-    n = 3 * len(data)
+    """Span count by the Bayesian information criterion over ``SPAN_CHOICES``.
+
+    The sample size is the number of data points, not of coordinates: after closest-point
+    reparameterization the residuals have no component along the curve, and the border
+    midpoints share their points pairwise, so counting 3 per point made the criterion buy
+    spans for noise (8-span edges with hooks at the corners on 0.2 % noise)."""
+    n = len(data)
     best = None
     for spans in SPAN_CHOICES:
         if spans > 1 and len(data) < POINTS_PER_SPAN * spans:
@@ -685,6 +694,14 @@ class _Sheets:
         return x
 
 
+def _quadric_rms(points: NDArray[np.float64], frame: NDArray[np.float64], origin: NDArray[np.float64]) -> float:
+    """RMS residual of a quadric height field over ``frame``'s first two axes."""
+    x, y, z = ((points - origin) @ frame.T).T
+    design = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    coef = np.linalg.lstsq(design, z, rcond=None)[0]
+    return float(np.sqrt(np.mean((design @ coef - z) ** 2)))
+
+
 def _smooth_corners(
     points: NDArray[np.float64],
     labels: NDArray[np.int64],
@@ -694,28 +711,40 @@ def _smooth_corners(
     users: dict[Key, list[int]],
     reach: float,
 ) -> dict[int, bool]:
-    """Whether the surface is smooth at each corner: the normals at the corner of quadrics
-    fitted to each incident segment's points within ``reach`` agree to ``SMOOTH_ANGLE`` (a
-    crease or a cone point makes them differ)."""
+    """Whether the surface is smooth at each corner: the incident segments' own quadrics
+    (points within ``reach``) agree on the normal at the corner to ``SMOOTH_ANGLE``, or one
+    quadric over all of them fits about as well as one per segment (a crease makes the common
+    one miss by a multiple of its angle x reach; noise affects both alike, so a crease lost in
+    the noise counts as smooth)."""
     cos_min = np.cos(np.radians(SMOOTH_ANGLE))
     out: dict[int, bool] = {}
     for c, incident in at_corner.items():
         segs = sorted({u for key, _ in incident for u in users[key]})
         idx = np.asarray(tree.query_ball_point(corners[c], reach), dtype=np.int64)
-        normals = []
-        for label in segs:
-            near = points[idx[labels[idx] == label]]
-            if len(near) < 6:
-                break
-            # The segment's own quadric, evaluated AT the corner: plane normals of the
-            # sectors would differ by the curvature across the reach on a smooth surface.
-            fit = _quadric(near, corners[c])
-            normals.append(fit[1] if fit is not None else np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1])
-        else:
-            n = np.array(normals)
-            out[c] = bool(len(n) >= 2 and np.abs(n @ n.T).min() >= cos_min)
+        idx = idx[np.isin(labels[idx], segs)]
+        near = points[idx]
+        groups = [near[labels[idx] == label] for label in segs]
+        if len(segs) < 2 or min(len(g) for g in groups) < 6:
+            out[c] = False
             continue
-        out[c] = False
+        # Test 1: each segment's own quadric, evaluated AT the corner, gives one normal
+        # (exact on clean data; plane normals of the sectors would differ by the curvature
+        # across the reach).
+        fits = [_quadric(g, corners[c]) for g in groups]
+        normals = np.array([
+            f[1] if f is not None else np.linalg.svd(g - g.mean(axis=0), full_matrices=False)[2][-1]
+            for f, g in zip(fits, groups)
+        ])
+        if np.abs(normals @ normals.T).min() >= cos_min:
+            out[c] = True
+            continue
+        # Test 2 (noise makes extrapolated normals scatter): one quadric fits about as well
+        # as one per segment.
+        origin = near.mean(axis=0)
+        frame = np.linalg.svd(near - origin, full_matrices=False)[2]
+        common = _quadric_rms(near, frame, origin)
+        own = np.sqrt(np.mean([_quadric_rms(g, frame, origin) ** 2 for g in groups]))
+        out[c] = common <= max(SMOOTH_RATIO * own, SMOOTH_FLOOR * reach)
     return out
 
 
