@@ -125,6 +125,8 @@ def test_report_matches_a_fresh_measure(sheet_run: dict[str, Any]) -> None:
         assert 0.0 < p["mean"] <= p["rms"] <= p["max"] <= 1e-3 * diagonal
         assert p["mean_rel"] == pytest.approx(p["mean"] / diagonal)
         assert p["max_rel"] == pytest.approx(p["max"] / diagonal)
+        # The JSON report asks for the orthogonal errors (one more projection per patch).
+        assert 0.0 < p["max_orthogonal"] <= p["max"] + 1e-9 * diagonal
     assert s["max_error_rel"] == pytest.approx(max(p["max_rel"] for p in patches))
     assert report["input"]["points"] == sheet_run["n_points"]
     assert report["input"]["segments"] == 4 and report["input"]["labels_from"] == "scalar_Label"

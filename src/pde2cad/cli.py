@@ -501,6 +501,9 @@ def _write_outputs(args: argparse.Namespace, rec: Any, outputs: dict[str, Path],
                   "tolerance": args.tolerance, "cad_tolerance": args.cad_tolerance,
                   "units": args.units, "schema": args.schema, "outliers": args.outliers,
                   "voxel": args.voxel},
+        # The orthogonal errors cost one more projection of every point; only the JSON
+        # report shows them.
+        orthogonal="report" in outputs,
     )  # fmt: skip
     report["outputs"] = {
         ("step" if key == "output" else key): str(path) for key, path in outputs.items()

@@ -165,7 +165,11 @@ def reconstruct(
     t0 = time.perf_counter()
     _report(progress, "layout", 0, 1)
     layout = build_layout(pts, lab, check=False)
-    tree = cKDTree(pts)
+    # The layout's own KD-tree of the points when it keeps one; otherwise a sliding-midpoint
+    # tree (a third faster to build on a million points, the same exact queries).
+    tree = getattr(layout, "tree", None)
+    if tree is None:
+        tree = cKDTree(pts, balanced_tree=False)
     timings["layout"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -194,16 +198,21 @@ def reconstruct(
                 continue
             c0 = patches[label]
             try:
+                # Same points and sides as the C0 fit: reuse its bilinear parameters.
                 c1 = fit_patch(
                     c0.points, continuity="c1", m=m, n=n, tolerance=tolerance,
-                    boundary=c0.sides, ribbons=ribbons[label],
+                    boundary=c0.sides, ribbons=ribbons[label], params=c0.params,
+                    outside=c0.outside,
                 )
             except FitError:
                 c1 = None
             # A bicubic base can misbehave near degenerate corners (two sides tangent) and
             # creases (measured on the pot: 4 of its 9 patches): keep the C0 fit then, and
             # say so in c0_fallback.
-            if c1 is not None and c1.errors["mean"] <= C1_ERROR_RATIO * c0.errors["mean"]:
+            # fit_errors: the fit's own mean (Patch.errors would project every point again).
+            if c1 is not None and (
+                c1.fit_errors["mean"] <= C1_ERROR_RATIO * c0.fit_errors["mean"]
+            ):
                 patches[label] = c1
             else:
                 fallback.append(label)

@@ -80,6 +80,7 @@ def build_report(
     settings: Mapping[str, Any] | None = None,
     timings: Mapping[str, float] | None = None,
     samples: int = 20,
+    orthogonal: bool = True,
 ) -> dict[str, Any]:
     """Read ``step_path`` back, measure it and describe the reconstruction ``rec``.
 
@@ -97,6 +98,10 @@ def build_report(
         Extra stage times (seconds), merged over ``rec.timings``.
     samples : int
         Points per edge for :func:`~pde2cad.occ.continuity.measure`.
+    orthogonal : bool
+        Include each patch's orthogonal errors (``mean_orthogonal``, ``max_orthogonal``),
+        which project every point onto its surface once more (about as long as a fit);
+        False leaves them out, e.g. when only the summary is shown.
 
     Returns
     -------
@@ -138,7 +143,8 @@ def build_report(
     patches = []
     for label in labels:
         patch = rec.patches[label]
-        err = patch.errors
+        quick = None if orthogonal else getattr(patch, "fit_errors", None)
+        err = patch.errors if quick is None else quick
         entry: dict[str, Any] = {
             "label": label,
             "points": int(len(patch.points)),

@@ -390,3 +390,35 @@ def test_estimate_needs_points_near_every_side() -> None:
         estimate_cross_derivatives(np.full((10, 3), np.nan), RNG.random((10, 2)), *sides)
     with pytest.raises(InputError, match=r"\[0, 1\]"):
         estimate_cross_derivatives(points, params + 0.5, *sides)
+
+
+# ------------------------------------------------------------------------- fast paths
+def test_chain_jet_for_many_points_equals_the_per_piece_sum() -> None:
+    """Many points on a chain of many cubics take the gathered-coefficient path: same values
+    and derivatives as evaluating every piece and picking each point's own."""
+    ctrl = RNG.normal(size=(9, 4, 3))
+    ctrl[1:, 0] = ctrl[:-1, 3]
+    curve = PiecewiseBezier.from_chain(ctrl)
+    s = RNG.random(5000)
+    s[:10] = curve.breaks
+    fast = curve.jet(s, 3)
+    small = np.concatenate([curve.jet(part, 3) for part in np.array_split(s, 200)], axis=1)
+    np.testing.assert_allclose(fast, small, rtol=0, atol=1e-11)
+
+
+@pytest.mark.parametrize("kind", ["bilinear", "bicubic"])
+def test_evaluate_of_many_points_equals_the_boolean_sum(kind: str) -> None:
+    """Scattered evaluations of many points run on the polynomial cells."""
+    bottom, right, top, left = _chain_sides()
+    if kind == "bilinear":
+        patch: BilinearCoons | BicubicCoons = BilinearCoons(bottom, right, top, left)
+    else:
+        patch = BicubicCoons(bottom, right, top, left, *RNG.normal(size=(4, 4, 3)))
+    u, v = RNG.random(6000), RNG.random(6000)
+    fast = patch.evaluate(u, v)
+    slow = patch._partials(u, v, ((0, 0),))[0]
+    assert fast.shape == (6000, 3)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-11)
+    grid = patch.evaluate(u[:, None], v[None, :50])  # a grid keeps the Boolean sum
+    column = patch._partials(u, np.full(u.size, v[7]), ((0, 0),))[0]
+    np.testing.assert_allclose(grid[:, 7], column, rtol=0, atol=1e-11)

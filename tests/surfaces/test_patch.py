@@ -556,3 +556,41 @@ def test_rejects_bad_input(
     data = _points("flag") if points is None else points
     with pytest.raises(InputError, match=match):
         fit_patch(data, **kwargs)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- reused parameters
+@pytest.mark.parametrize("continuity", ["c0", "c1"])
+def test_precomputed_params_give_the_same_fit(continuity: str) -> None:
+    """``params=`` / ``outside=`` from a C0 fit on the same points and sides skip the
+    projection onto the bilinear base and change nothing: geometry, parameters, errors."""
+    points = _points("skirt")
+    c0 = _fit("skirt", "c0", 6)
+    plain = fit_patch(points, continuity=continuity, m=6, n=6, boundary=c0.sides)  # type: ignore[arg-type]
+    reused = fit_patch(
+        points, continuity=continuity, m=6, n=6, boundary=c0.sides,  # type: ignore[arg-type]
+        params=c0.params, outside=c0.outside,
+    )
+    np.testing.assert_array_equal(reused.params, plain.params)
+    np.testing.assert_array_equal(reused.outside, plain.outside)
+    np.testing.assert_array_equal(
+        reused.deformation.coefficients, plain.deformation.coefficients
+    )
+    u, v = np.meshgrid(RIM, RIM)
+    np.testing.assert_array_equal(reused.evaluate(u, v), plain.evaluate(u, v))
+    assert reused.errors == plain.errors
+    assert reused.fit_errors == plain.fit_errors
+    assert set(reused.fit_errors) == {"mean", "max", "rms", "base_mean", "base_max"}
+    assert reused.fit_errors["mean"] == reused.errors["mean"]
+
+
+def test_precomputed_params_are_checked() -> None:
+    points = _points("skirt")
+    c0 = _fit("skirt", "c0", 6)
+    with pytest.raises(InputError, match="together"):
+        fit_patch(points, boundary=c0.sides, params=c0.params)
+    with pytest.raises(InputError, match="boundary="):
+        fit_patch(points, params=c0.params, outside=c0.outside)
+    with pytest.raises(InputError, match="shape"):
+        fit_patch(points, boundary=c0.sides, params=c0.params[1:], outside=c0.outside)
+    with pytest.raises(InputError, match=r"\[0, 1\]"):
+        fit_patch(points, boundary=c0.sides, params=c0.params + 2.0, outside=c0.outside)

@@ -151,3 +151,14 @@ def test_a_million_points() -> None:
     np.testing.assert_allclose(params, uv, rtol=0, atol=1e-8)
     np.testing.assert_allclose(dist, np.abs(h), rtol=0, atol=1e-10)
     assert not outside.any()
+
+
+def test_result_does_not_depend_on_chunks_or_threads() -> None:
+    """Chunks are balanced over the threads; every point's answer is its own."""
+    patch = _curved_patch("length")
+    _, points, _ = _offset_samples(patch, 20000, 0.3)
+    single = project_points(patch, points, workers=1, chunk=10**6)
+    for workers, chunk in ((2, 50_000), (2, 777), (3, 4096)):
+        split = project_points(patch, points, workers=workers, chunk=chunk)
+        for a, b in zip(single, split, strict=True):
+            np.testing.assert_array_equal(a, b)

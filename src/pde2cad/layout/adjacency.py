@@ -119,6 +119,8 @@ class Layout:
         ``members = np.flatnonzero(labels == label)`` and ``uv`` the members' projection on
         their :func:`~pde2cad.surfaces.region.pca_frame` (what ``extract_boundary`` computes
         for ``points[members]`` with the default alpha), so it need not be computed again.
+    tree : cKDTree or None
+        The k-d tree of all the points (kept so later stages need not build another).
     """
 
     labels_present: NDArray[np.int64]
@@ -130,6 +132,7 @@ class Layout:
     spacing: float
     radius: float
     loops: dict[int, NDArray[np.int64]] = field(default_factory=dict)
+    tree: cKDTree | None = field(default=None, repr=False, compare=False)
 
 
 # --------------------------------------------------------------------------- checks
@@ -514,6 +517,7 @@ def build_layout(
         spacing=spacing,
         radius=radius,
         loops=loops,
+        tree=tree,
     )
 
 

@@ -83,6 +83,8 @@ PAIR_REACH = 2.5
 #: intersection, not onto one quadric fitted across both (which rounds the crease off).
 #: Measured medians: smooth seams <= 15 deg at 0.4 % noise, the pot's 56-deg crease >= 50.
 CREASE_ANGLE = 25.0
+#: The one-sided surfaces use the segment's points within this many radii of the queries.
+SHEET_REACH = 8.0
 #: Cloud neighbours of the one-sided quadrics that test an edge for a crease.
 CREASE_NEIGHBOURS = 120
 #: Data points per edge (at most) used to test it for a crease.
@@ -537,7 +539,7 @@ def build_edges(
     smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users, max(QUADRIC_RADIUS * radius, 4 * spacing))
     # Creases: shared edges whose two segments' own surfaces meet at an angle along them (a
     # median over the edge's data survives noise that hides the crease at one corner).
-    sheets = _Sheets(pts, lab)
+    sheets = _Sheets(pts, lab, tree, SHEET_REACH * radius)
     creases = set()
     for key, who in users.items():
         if len(who) == 2:
@@ -674,18 +676,23 @@ class _Sheets:
     """Each segment's own surface (its points' moving quadrics), for creases: where two
     segments meet at an angle, the edge is where their surfaces intersect."""
 
-    def __init__(self, points: NDArray[np.float64], labels: NDArray[np.int64]) -> None:
-        self.points, self.labels = points, labels
-        self.cache: dict[int, tuple[NDArray[np.float64], cKDTree]] = {}
+    def __init__(
+        self, points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, reach: float
+    ) -> None:
+        self.points, self.labels, self.tree, self.reach = points, labels, tree, reach
 
     def project(
         self, q: NDArray[np.float64], label: int, k: int = MLS_NEIGHBOURS
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        if label not in self.cache:
-            own = self.points[self.labels == label]
-            self.cache[label] = (own, cKDTree(own))
-        own, tree = self.cache[label]
-        return mls_project(q, own, tree, k)
+        # The segment's points within ``reach`` of the queries only: a tree over a whole
+        # segment of a 1e6-point cloud costs more than every query on it.
+        rows = self.tree.query_ball_point(q, self.reach)
+        idx = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in rows]))
+        idx = idx[self.labels[idx] == label]
+        if len(idx) < k:
+            idx = np.flatnonzero(self.labels == label)
+        own = self.points[idx]
+        return mls_project(q, own, cKDTree(own), k)
 
     def angle(self, q: NDArray[np.float64], labels: list[int]) -> float:
         """Median angle (degrees) between two segments' surface normals below ``q`` (wider

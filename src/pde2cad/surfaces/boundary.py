@@ -94,6 +94,9 @@ class PiecewiseBezier:
         matrix = np.ascontiguousarray(coef.transpose(1, 0, 2).reshape(4, -1))
         matrix.setflags(write=False)
         object.__setattr__(self, "_coef_matrix", matrix)
+        coef = np.ascontiguousarray(coef)
+        coef.setflags(write=False)
+        object.__setattr__(self, "_coef", coef)
 
     # ----------------------------------------------------------------- constructors
     @classmethod
@@ -204,16 +207,27 @@ class PiecewiseBezier:
             k = np.clip(np.searchsorted(self.breaks, flat, side="right") - 1, 0, k_count - 1)
             t = flat - self.breaks[k]
         out = np.empty((order + 1, n, dim))
-        for r in range(order + 1):
-            # Rows of d^r/dt^r [1, t, t^2, t^3] times the power coefficients of every piece
-            # in one contraction, then each point keeps its own piece: cheaper than gathering
-            # coefficients per point. einsum rather than @, as a threaded BLAS is slower than
-            # the work itself for an inner dimension of 4.
-            pieces = np.einsum("nj,jk->nk", monomials(t, r), self._coef_matrix)  # type: ignore[attr-defined]
-            if k_count == 1:
-                out[r] = pieces
-            else:
-                out[r] = pieces.reshape(n, k_count, dim)[np.arange(n), k]
+        if k_count == 1 or n <= 4 * k_count:
+            for r in range(order + 1):
+                # Rows of d^r/dt^r [1, t, t^2, t^3] times the power coefficients of every
+                # piece in one contraction, then each point keeps its own piece. einsum
+                # rather than @, as a threaded BLAS is slower than the work itself for an
+                # inner dimension of 4.
+                pieces = np.einsum("nj,jk->nk", monomials(t, r), self._coef_matrix)  # type: ignore[attr-defined]
+                if k_count == 1:
+                    out[r] = pieces
+                else:
+                    out[r] = pieces.reshape(n, k_count, dim)[np.arange(n), k]
+        else:
+            # Many points on a chain of many cubics: gather each point's own coefficients
+            # once (cost independent of K) and sum the same monomial terms.
+            cd = self._coef[k]  # type: ignore[attr-defined]  # (n, 4, D)
+            for r in range(order + 1):
+                mono = monomials(t, r)
+                acc = out[r]
+                np.multiply(mono[:, r, None], cd[:, r], out=acc)
+                for j in range(r + 1, 4):
+                    acc += mono[:, j, None] * cd[:, j]
         return out.reshape((order + 1, *s.shape, dim))
 
     def evaluate(self, s: ArrayLike) -> NDArray[np.float64]:

@@ -154,12 +154,73 @@ def _cell_jet(
     dim = coef.shape[-1]
     c = coef[..., None]  # (4, 4, D, 1) broadcasts against (n,)
     q = np.empty((3, 4, dim, x.size))  # q[b, i] = d^b/dy^b sum_j c[i, j] y^j
-    for i in range(4):
-        for b in range(3):
-            _horner([c[i, j] for j in range(4)], y, b, q[b, i])
+    rows = [c[:, j] for j in range(4)]  # (4, D, 1): all four i at once
+    for b in range(3):
+        _horner(rows, y, b, q[b])
     out = np.empty((len(_JET_ORDERS), dim, x.size))
     for k, (a, b) in enumerate(_JET_ORDERS):
         _horner(list(q[b]), x, a, out[k])
+    return out
+
+
+#: Scattered evaluations of at least this many points use the polynomial cells.
+_CELL_MIN = 4096
+
+
+def _horner_values(
+    coef: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``sum_ij coef[i, j] x^i y^j`` for one bicubic cell ``coef`` (4, 4, D) at ``x, y``
+    (n,): (D, n), coordinate-major so the points run along contiguous rows."""
+    c = coef[..., None]  # (4, 4, D, 1) broadcasts against (n,)
+    acc = np.empty((coef.shape[-1], x.size))
+    row = np.empty_like(acc)
+    for i in range(3, -1, -1):
+        # Horner in y for row i, then in x, in place: no temporaries of n values.
+        np.multiply(c[i, 3], y, out=row)
+        row += c[i, 2]
+        row *= y
+        row += c[i, 1]
+        row *= y
+        row += c[i, 0]
+        if i == 3:
+            acc[:] = row
+        else:
+            acc *= x
+            acc += row
+    return acc
+
+
+def cell_values(
+    cells: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Values of a patch given as polynomial cells (see :meth:`_BooleanSumPatch.power_cells`)
+    at ``u, v`` (n,): (n, D).
+
+    The points are sorted by cell once, so every cell is one contiguous Horner scheme.
+    """
+    ub, vb, coef = cells
+    nu, nv, dim = coef.shape[0], coef.shape[1], coef.shape[-1]
+    u = np.asarray(u, dtype=float).reshape(-1)
+    v = np.asarray(v, dtype=float).reshape(-1)
+    iu = np.clip(np.searchsorted(ub, u, side="right") - 1, 0, nu - 1)
+    iv = np.clip(np.searchsorted(vb, v, side="right") - 1, 0, nv - 1)
+    x, y = u - ub[iu], v - vb[iv]
+    if nu * nv == 1:
+        return _horner_values(coef[0, 0], x, y).T
+    cell = iu * nv + iv
+    # A stable sort of small integers is a radix sort: O(n).
+    order = np.argsort(cell.astype(np.int16 if nu * nv < 2**15 else np.int64), kind="stable")
+    starts = np.searchsorted(cell[order], np.arange(nu * nv + 1))
+    xs, ys = x[order], y[order]
+    res = np.empty((dim, u.size))
+    for c in np.flatnonzero(np.diff(starts)):
+        part = slice(starts[c], starts[c + 1])
+        res[:, part] = _horner_values(coef[c // nv, c % nv], xs[part], ys[part])
+    out = np.empty((u.size, dim))
+    out[order] = res.T
     return out
 
 
@@ -211,7 +272,18 @@ class _BooleanSumPatch:
         return out
 
     def evaluate(self, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
-        """Points ``S(u, v)``; ``u``, ``v`` broadcast, result ``shape + (D,)``."""
+        """Points ``S(u, v)``; ``u``, ``v`` broadcast, result ``shape + (D,)``.
+
+        Many scattered points (``u`` and ``v`` both of at least ``_CELL_MIN`` values) are
+        evaluated on :meth:`power_cells`, the same polynomial (equal to rounding) at a
+        fraction of the cost; grids and small inputs by the Boolean sum itself.
+        """
+        u, v = _broadcast_params(u, v)
+        if u.size >= _CELL_MIN and v.size >= _CELL_MIN:
+            shape = np.broadcast_shapes(u.shape, v.shape)
+            flat_u = np.broadcast_to(u, shape).reshape(-1)
+            flat_v = np.broadcast_to(v, shape).reshape(-1)
+            return cell_values(self.power_cells(), flat_u, flat_v).reshape((*shape, self.dim))
         return self._partials(u, v, ((0, 0),))[0]
 
     def derivatives(
@@ -284,15 +356,18 @@ class _BooleanSumPatch:
         else:
             # Sort by cell so each cell is one contiguous Horner evaluation.
             cell = iu * nv + iv
-            order = np.argsort(cell, kind="stable")
+            # A stable sort of small integers is a radix sort: O(n).
+            small = np.int16 if nu * nv < 2**15 else np.int64
+            order = np.argsort(cell.astype(small), kind="stable")
             starts = np.searchsorted(cell[order], np.arange(nu * nv + 1))
             xs, ys = x[order], y[order]
             res = np.empty((len(_JET_ORDERS), self.dim, u.size))
             for c in np.flatnonzero(np.diff(starts)):
                 part = slice(starts[c], starts[c + 1])
                 res[:, :, part] = _cell_jet(coef[c // nv, c % nv], xs[part], ys[part])
-            out = np.empty_like(res)
-            out[:, :, order] = res
+            inverse = np.empty_like(order)
+            inverse[order] = np.arange(order.size)
+            out = res.take(inverse, axis=2)  # back to the input order (faster than a scatter)
         return tuple(o.T.reshape((*shape, self.dim)) for o in out)
 
 
@@ -631,41 +706,53 @@ def estimate_cross_derivatives(
     rib_cols = n_basis - 4 if match_corners else n_basis  # pinned ends and twists leave
     side_cols = rib_cols + (order - 1) * n_basis
     n_cols = n_twist + 4 * side_cols
-    blocks: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-    for idx, (name, (along, offset, corner_ij, pin0, pin1)) in enumerate(spec.items()):
-        s_all = prm[:, along]
-        w_all = prm[:, 1 - along] - offset
-        sel = np.abs(w_all) < band
-        s, w = s_all[sel], w_all[sel][:, None]
-        if s.size < side_cols + (2 if match_corners else 0):
-            raise FitError(
-                f"only {s.size} points lie within band={band} of the {name} side, too few for "
-                f"{side_cols} unknowns; widen band, or lower pieces / order"
-            )
-        rhs = pts[sel] - sides[name].evaluate(s)
-        basis = _hermite_design(s, breaks)
-        cols = np.zeros((s.size, n_cols))
-        base = n_twist + idx * side_cols
-        if match_corners:
-            # Ribbon node layout: values V_0..V_K, slopes T_0..T_K; V_0, V_K are pinned
-            # (moved to the right-hand side), T_0, T_K are the shared corner twists.
-            rhs = rhs - w * (basis[:, :1] * pin0 + basis[:, n_nodes - 1 : n_nodes] * pin1)
-            c0, c1 = (2 * i + j for i, j in corner_ij)
-            cols[:, c0] = w[:, 0] * basis[:, n_nodes]
-            cols[:, c1] = w[:, 0] * basis[:, -1]
-            free = np.r_[1 : n_nodes - 1, n_nodes + 1 : 2 * n_nodes - 1]
-            cols[:, base : base + rib_cols] = w * basis[:, free]
-        else:
-            cols[:, base : base + rib_cols] = w * basis
-        for p in range(2, order + 1):
-            start = base + rib_cols + (p - 2) * n_basis
-            cols[:, start : start + n_basis] = w**p * basis
-        # Reduce each band to its small triangular factor: the joint problem is then tiny.
-        r = np.linalg.qr(np.hstack([cols, rhs]), mode="r")
-        blocks.append((r[:, :n_cols], r[:, n_cols:]))
-    a = np.vstack([b[0] for b in blocks])
-    b = np.vstack([b[1] for b in blocks])
-    sol, _, rank, sv = np.linalg.lstsq(a, b, rcond=None)
+    # Thin QR factorizations and a tiny least squares: a threaded BLAS only adds barriers.
+    from pde2cad.surfaces.deformation import _single_threaded_blas
+
+    with _single_threaded_blas():
+        blocks: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+        for idx, (name, (along, offset, corner_ij, pin0, pin1)) in enumerate(spec.items()):
+            s_all = prm[:, along]
+            w_all = prm[:, 1 - along] - offset
+            sel = np.abs(w_all) < band
+            s, w = s_all[sel], w_all[sel][:, None]
+            if s.size < side_cols + (2 if match_corners else 0):
+                raise FitError(
+                    f"only {s.size} points lie within band={band} of the {name} side, too few "
+                    f"for {side_cols} unknowns; widen band, or lower pieces / order"
+                )
+            rhs = pts[sel] - sides[name].evaluate(s)
+            basis = _hermite_design(s, breaks)
+            # Only this side's columns (and its two corner twists) are non-zero in its band:
+            # factor those alone and place the triangle's columns back (same normal equations,
+            # a fraction of the work).
+            base = n_twist + idx * side_cols
+            used = list(range(base, base + side_cols))
+            if match_corners:
+                used = [2 * i + j for i, j in corner_ij] + used
+            cols = np.zeros((s.size, len(used)))
+            first = 2 if match_corners else 0  # local column of the side's first unknown
+            if match_corners:
+                # Ribbon node layout: values V_0..V_K, slopes T_0..T_K; V_0, V_K are pinned
+                # (moved to the right-hand side), T_0, T_K are the shared corner twists.
+                rhs = rhs - w * (basis[:, :1] * pin0 + basis[:, n_nodes - 1 : n_nodes] * pin1)
+                cols[:, 0] = w[:, 0] * basis[:, n_nodes]
+                cols[:, 1] = w[:, 0] * basis[:, -1]
+                free = np.r_[1 : n_nodes - 1, n_nodes + 1 : 2 * n_nodes - 1]
+                cols[:, first : first + rib_cols] = w * basis[:, free]
+            else:
+                cols[:, first : first + rib_cols] = w * basis
+            for p in range(2, order + 1):
+                start = first + rib_cols + (p - 2) * n_basis
+                cols[:, start : start + n_basis] = w**p * basis
+            # Reduce each band to its small triangular factor: the joint problem is then tiny.
+            r = np.linalg.qr(np.hstack([cols, rhs]), mode="r")
+            r_full = np.zeros((r.shape[0], n_cols))
+            r_full[:, used] = r[:, : len(used)]
+            blocks.append((r_full, r[:, len(used) :]))
+        a = np.vstack([b[0] for b in blocks])
+        b = np.vstack([b[1] for b in blocks])
+        sol, _, rank, sv = np.linalg.lstsq(a, b, rcond=None)
     if rank < n_cols or sv[-1] < 1e-12 * sv[0]:
         raise FitError(
             "the points near the sides do not determine the ribbons (rank-deficient fit); "

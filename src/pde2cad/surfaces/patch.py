@@ -44,6 +44,7 @@ from pde2cad.surfaces.coons import (
     BicubicCoons,
     BilinearCoons,
     Ribbons,
+    cell_values,
     estimate_cross_derivatives,
     three_sided,
 )
@@ -64,37 +65,9 @@ C1Basis = Literal["complete", "thesis"]
 MAX_TERMS = 20
 # Points examined by the collinearity test (a strided subsample bounds its cost).
 _SHAPE_SAMPLE = 200_000
-# Points per block of the base evaluation: the Horner temporaries stay in cache.
-_BLOCK = 32_768
 # Parametric step towards the centre used for normals where S_u x S_v vanishes (the
 # collapsed side of a 3-sided patch): the limit normal, to about this relative accuracy.
 _NORMAL_INSET = 1e-7
-
-
-def _horner_cell(
-    coef: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """``sum_ij coef[i, j] x^i y^j`` for one bicubic cell ``coef`` (4, 4, D) at ``x, y``
-    (n,): (D, n), coordinate-major so the points run along contiguous rows."""
-    dim = coef.shape[-1]
-    out = np.empty((dim, x.size))
-    row = np.empty(x.size)
-    for d in range(dim):
-        c, acc = coef[..., d], out[d]
-        for i in range(3, -1, -1):
-            # Horner in y for row i, then in x, in place: no temporaries of n values.
-            np.multiply(y, c[i, 3], out=row)
-            row += c[i, 2]
-            row *= y
-            row += c[i, 1]
-            row *= y
-            row += c[i, 0]
-            if i == 3:
-                acc[:] = row
-            else:
-                acc *= x
-                acc += row
-    return out
 
 
 def _cell_values(
@@ -104,28 +77,9 @@ def _cell_values(
 
     The Boolean sum (Eq. 5.2) evaluates every side, ribbon and blend per point; on the
     bicubic cells of :meth:`~pde2cad.surfaces.coons.BilinearCoons.power_cells` a value costs
-    one 4 x 4 Horner scheme, several times less for a million points. Points go in blocks
-    that stay in cache.
+    one 4 x 4 Horner scheme, several times less for a million points.
     """
-    ub, vb, coef = base.power_cells()
-    nu, nv, dim = coef.shape[0], coef.shape[1], coef.shape[-1]
-    out = np.empty((u.size, dim))
-    for start in range(0, u.size, _BLOCK):
-        part = slice(start, start + _BLOCK)
-        bu, bv = u[part], v[part]
-        iu = np.clip(np.searchsorted(ub, bu, side="right") - 1, 0, nu - 1)
-        iv = np.clip(np.searchsorted(vb, bv, side="right") - 1, 0, nv - 1)
-        x, y = bu - ub[iu], bv - vb[iv]
-        if nu * nv == 1:
-            out[part] = _horner_cell(coef[0, 0], x, y).T
-            continue
-        cell = iu * nv + iv
-        block = np.empty((dim, bu.size))
-        for c in np.unique(cell):
-            idx = np.flatnonzero(cell == c)
-            block[:, idx] = _horner_cell(coef[c // nv, c % nv], x[idx], y[idx])
-        out[part] = block.T
-    return out
+    return cell_values(base.power_cells(), u, v)
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,6 +153,13 @@ class Patch:
         return int(total)
 
     # ----------------------------------------------------------------- errors
+    @property
+    def fit_errors(self) -> dict[str, float]:
+        """The errors known from the fit itself, without the extra projection of
+        :attr:`errors`: ``mean``, ``max``, ``rms`` (Eq. 5.22 at the fitted parameters) and
+        ``base_mean``, ``base_max`` (the Coons base alone)."""
+        return dict(self._fit_errors)
+
     @cached_property
     def errors(self) -> dict[str, float]:
         """Fitting errors over all ``N`` input points (duplicates count as often as given).
@@ -374,6 +335,34 @@ def _check_ribbons(ribbons: object, continuity: str) -> Ribbons | None:
     return ribbons
 
 
+def _check_params(
+    params: ArrayLike | None, outside: ArrayLike | None, count: int, boundary: object
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | None:
+    """Validated ``(params, outside)`` handed to :func:`fit_patch`, or None."""
+    if params is None and outside is None:
+        return None
+    if params is None or outside is None:
+        raise InputError(
+            "params= and outside= go together (Patch.params and Patch.outside of a previous "
+            "fit on the same points and sides); pass both or neither"
+        )
+    if boundary is None:
+        raise InputError(
+            "params= only applies with boundary= (the parameters belong to the bilinear patch "
+            "of those sides); pass the sides of the fit the parameters come from"
+        )
+    prm = np.asarray(params, dtype=float)
+    out = np.asarray(outside)
+    if prm.shape != (count, 2) or out.shape != (count,):
+        raise InputError(
+            f"params must have shape ({count}, 2) and outside ({count},), one per point; got "
+            f"{prm.shape} and {out.shape}"
+        )
+    if not np.all(np.isfinite(prm)) or np.any(prm < 0.0) or np.any(prm > 1.0):
+        raise InputError("params must be finite and lie in [0, 1]^2 (as project_points returns)")
+    return prm, out.astype(bool, copy=False)
+
+
 # --------------------------------------------------------------------------- the fit
 def fit_patch(
     points: ArrayLike,
@@ -389,6 +378,8 @@ def fit_patch(
     refine: int = 0,
     c1_basis: C1Basis = "complete",
     boundary_tolerance: float | None = None,
+    params: ArrayLike | None = None,
+    outside: ArrayLike | None = None,
 ) -> Patch:
     """Fit one parametric patch to the points of one region (Sections 5.2-5.3).
 
@@ -437,6 +428,14 @@ def fit_patch(
         C1 deformation terms: ``sin(pi t) sin(k pi t)`` (kind ``"c1full"``, complete) or the
         thesis's ``sin^2(k pi t)`` (Eq. 5.21, kind ``"c1"``, symmetric about the patch centre
         lines, so it cannot fit asymmetric shapes).
+    params : (N, 2) float, optional
+        The points' closest-point parameters on the bilinear Coons patch of these sides, as
+        a previous fit on the same points and sides found them (``Patch.params`` of a C0
+        fit): the projection onto the bilinear base is skipped. Must come with ``outside``
+        and needs ``boundary``; the result is the same as without them when they are that
+        fit's values.
+    outside : (N,) bool, optional
+        The matching ``Patch.outside`` flags (required with ``params``).
 
     Returns
     -------
@@ -471,11 +470,15 @@ def fit_patch(
     _check_terms(m, n, pts, tolerance)
     given_ribbons = _check_ribbons(ribbons, continuity)
     region, sides = _resolve_boundary(pts, boundary, corners, boundary_tolerance)
+    given_params = _check_params(params, outside, pts.shape[0], boundary)
     if pts.shape[1] != sides[0].dim:
         raise InputError(f"points are 3-D but the boundary curves have dimension {sides[0].dim}")
 
     bilinear = _bilinear(sides)
-    params, _, outside = project_points(bilinear, pts)
+    if given_params is None:
+        params, _, outside = project_points(bilinear, pts)
+    else:
+        params, outside = given_params
     base: BilinearCoons | BicubicCoons = bilinear
     rib: Ribbons | None = None
     if continuity == "c1":
