@@ -10,10 +10,12 @@ from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons
 from pde2cad.surfaces.deformation import (
+    AUTO_TERMS,
     Deformation,
     DeformedPatch,
     choose_mn,
     fit_deformation,
+    select_terms,
     sine_basis,
 )
 
@@ -217,3 +219,33 @@ def test_choose_mn_reports_an_unreachable_tolerance() -> None:
         FitError, match=r"tolerance 1e-06 not reached with M = N <= 4 \(best max error"
     ):
         choose_mn(residuals, params, tolerance=1e-6, max_mn=4)
+
+
+def test_select_terms_follows_the_shape_not_the_noise() -> None:
+    """Hold-out validation: a bump that needs many terms gets them; pure noise gets the
+    fewest candidates (extra terms would only fit the noise)."""
+    rng = np.random.default_rng(3)
+    p = rng.random((20000, 2))
+    bump = np.exp(-((p[:, 0] - 0.3) ** 2 + (p[:, 1] - 0.6) ** 2) / 0.01)
+    smooth = np.column_stack([np.zeros(len(p)), np.zeros(len(p)), bump * np.sin(np.pi * p[:, 0])])
+    k = select_terms(smooth, p)
+    assert k >= 12
+    fit = fit_deformation(smooth, p, k, k)
+    assert fit.rms_error <= 0.2 * fit_deformation(smooth, p, 6, 6).rms_error
+    noise = rng.normal(scale=1e-3, size=(20000, 3))
+    assert select_terms(noise, p) == min(AUTO_TERMS)
+    assert select_terms(smooth[:50], p[:50]) == min(AUTO_TERMS)  # too few points to score
+
+
+def test_fit_patch_auto_terms_together() -> None:
+    from pde2cad.surfaces.patch import fit_patch
+
+    g = np.linspace(0.0, 1.0, 40)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    pts = np.column_stack([x, y, 0.1 * np.sin(np.pi * x) * np.sin(2 * np.pi * y)])
+    corners = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    with pytest.raises(InputError, match="auto"):
+        fit_patch(pts, m="auto", n=5, corners=corners)
+    patch = fit_patch(pts, m="auto", n="auto", corners=corners)
+    assert patch.deformation.m == patch.deformation.n >= min(AUTO_TERMS)
+    assert patch.errors["max"] <= 1e-3

@@ -48,6 +48,15 @@ _T = TypeVar("_T")
 
 #: Relative Tikhonov weight used automatically when the fit is close to under-determined.
 AUTO_RIDGE = 1e-6
+#: Candidate M = N of the automatic term count (:func:`select_terms`).
+AUTO_TERMS = (6, 8, 10, 12, 14, 16)
+#: Share of the points held out to score each candidate, and the largest sample scored.
+AUTO_HOLDOUT = 0.25
+AUTO_SAMPLE = 40_000
+#: Fewest training points per unknown of a candidate.
+AUTO_POINTS_PER_TERM = 4
+#: The smallest candidate whose held-out RMS error is within this factor of the best wins.
+AUTO_SLACK = 1.01
 
 
 def _check_kind(kind: str) -> None:
@@ -681,6 +690,59 @@ def fit_deformation(
         raise InputError(f"ridge must be >= 0, got {ridge}")
     with _single_threaded_blas():
         return _solve(r, p, _accumulate(r, p, m, n, kind), m, n, ridge)
+
+
+def select_terms(
+    residuals: ArrayLike,
+    params: ArrayLike,
+    kind: Kind = "c0",
+    candidates: tuple[int, ...] = AUTO_TERMS,
+    seed: int = 0,
+) -> int:
+    """The term count ``M = N`` that predicts held-out points best (hold-out validation).
+
+    A random ``AUTO_HOLDOUT`` share of (at most ``AUTO_SAMPLE``) points is set aside; each
+    candidate is fitted to the rest (one accumulation of the normal equations, then a small
+    solve per candidate) and scored by its RMS error on the held-out points. The smallest
+    candidate within ``AUTO_SLACK`` of the best score is returned: more terms where the
+    shape needs them and the points carry them, fewer where extra terms would only follow
+    the noise.
+
+    Parameters
+    ----------
+    residuals, params, kind
+        As in :func:`fit_deformation`.
+    candidates : tuple of int
+        Increasing ``K`` to try; those with fewer than ``AUTO_POINTS_PER_TERM`` training
+        points per unknown are skipped.
+    seed : int
+        Of the random hold-out split (fixed: the same data give the same choice).
+
+    Returns
+    -------
+    int
+        ``K``; the smallest candidate when the points are too few to score any.
+    """
+    r, p = _check_fit_input(residuals, params)
+    _check_kind(kind)
+    rng = np.random.default_rng(seed)
+    pick = rng.permutation(r.shape[0])[: min(r.shape[0], AUTO_SAMPLE)]
+    n_test = int(len(pick) * AUTO_HOLDOUT)
+    test, train = pick[:n_test], pick[n_test:]
+    usable = [int(k) for k in candidates if AUTO_POINTS_PER_TERM * k * k <= len(train)]
+    if n_test < 10 or not usable:
+        return int(min(candidates))
+    top = max(usable)
+    r_train, p_train = r[train], p[train]
+    scores = []
+    with _single_threaded_blas():
+        data = _accumulate(r_train, p_train, top, top, kind)
+        for k in usable:
+            fit = _solve(r_train, p_train, data, k, k, None)
+            miss = r[test] - fit.evaluate(p[test, 0], p[test, 1])
+            scores.append(float(np.sqrt(np.einsum("ij,ij->", miss, miss) / len(test))))
+    best = min(scores)
+    return next(k for k, score in zip(usable, scores) if score <= AUTO_SLACK * best)
 
 
 def choose_mn(

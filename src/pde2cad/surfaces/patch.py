@@ -54,6 +54,7 @@ from pde2cad.surfaces.deformation import (
     Kind,
     choose_mn,
     fit_deformation,
+    select_terms,
 )
 from pde2cad.surfaces.projection import project_points
 from pde2cad.surfaces.region import RegionBoundary, extract_boundary
@@ -262,9 +263,15 @@ def _check_points(points: ArrayLike) -> NDArray[np.float64]:
     return pts
 
 
-def _check_terms(m: int, n: int, pts: NDArray[np.float64], tolerance: float | None) -> None:
-    """M, N positive integers and no more unknowns than distinct points."""
-    if int(m) != m or int(n) != n or m < 1 or n < 1:
+def _check_terms(
+    m: int | str, n: int | str, pts: NDArray[np.float64], tolerance: float | None
+) -> None:
+    """M, N positive integers (or both ``"auto"``) and no more unknowns than distinct points."""
+    if m == "auto" or n == "auto":
+        if m != n:
+            raise InputError(f'M and N are "auto" together or not at all, got M={m!r}, N={n!r}')
+        return
+    if isinstance(m, str) or isinstance(n, str) or int(m) != m or int(n) != n or m < 1 or n < 1:
         raise InputError(f"M and N must be positive integers, got M={m}, N={n}")
     if tolerance is not None:
         if not tolerance > 0:
@@ -368,8 +375,8 @@ def fit_patch(
     points: ArrayLike,
     *,
     continuity: Continuity = "c0",
-    m: int = 5,
-    n: int = 5,
+    m: int | str = 5,
+    n: int | str = 5,
     tolerance: float | None = None,
     corners: ArrayLike | None = None,
     boundary: RegionBoundary | Sequence[PiecewiseBezier | ArrayLike] | None = None,
@@ -393,8 +400,10 @@ def fit_patch(
         sides, hence positional continuity with neighbours sharing them. ``"c1"``: bicubic
         Coons base (Eqs. 5.2-5.7) + sin^2 deformation (Eq. 5.21): keeps sides, cross-boundary
         derivatives and twists, hence tangential continuity with neighbours sharing them.
-    m, n : int
+    m, n : int or "auto"
         Numbers of deformation terms M, N (Eqs. 5.17, 5.21). Ignored with ``tolerance``.
+        ``"auto"`` (both): ``M = N`` chosen by hold-out validation
+        (:func:`~pde2cad.surfaces.deformation.select_terms`).
     tolerance : float, optional
         Target for the maximum parametric error (Eq. 5.22), in the units of the points: the
         fewest terms that reach it are used (M = N first, then each lowered; up to
@@ -504,6 +513,11 @@ def fit_patch(
     residuals = pts - _cell_values(base, params[:, 0], params[:, 1])
     base_err = np.sqrt(np.einsum("ij,ij->i", residuals, residuals))
     if tolerance is None:
+        if m == "auto":
+            # Scored on the points within the sides: those beyond keep their distance to
+            # the boundary whatever the terms, and would hide the differences.
+            inside = ~outside if (~outside).sum() >= 100 else np.ones(len(pts), dtype=bool)
+            m = n = select_terms(residuals[inside], params[inside], kind)
         deformation = fit_deformation(residuals, params, int(m), int(n), kind)
     else:
         try:
