@@ -99,8 +99,8 @@ def test_report_matches_a_fresh_measure(sheet_run: dict[str, Any]) -> None:
     assert sheet_run["code"] == 0, sheet_run["stderr"]
     report = json.loads(sheet_run["out"]["report"].read_text())
     assert set(report) >= {"input", "settings", "summary", "edges", "patches", "timings", "outputs"}
-    m = measure(read_step(sheet_run["out"]["step"]))
     s = report["summary"]
+    m = measure(read_step(sheet_run["out"]["step"]), samples=s["seam_samples"])
     diagonal = sheet_run["diagonal"]
     assert s["diagonal"] == pytest.approx(diagonal, rel=1e-6)
     for key in ("n_faces", "shared_edges", "free_edges", "valid", "closed"):
@@ -134,6 +134,22 @@ def test_report_matches_a_fresh_measure(sheet_run: dict[str, Any]) -> None:
     assert report["outputs"]["step"] == str(sheet_run["out"]["step"])
     assert all(isinstance(v, float) and v >= 0 for v in report["timings"].values())
     assert report["timings"]["total"] >= report["timings"]["reconstruct"]
+
+
+def test_report_splits_seams_by_corner(sheet_run: dict[str, Any]) -> None:
+    """A 2 x 2 sheet: one interior four-patch corner, four two-patch and four one-patch corners
+    on the open boundary; all regular, so the whole seam counts as away from irregular ones."""
+    assert sheet_run["code"] == 0, sheet_run["stderr"]
+    report = json.loads(sheet_run["out"]["report"].read_text())
+    s = report["summary"]
+    assert s["corner_valences"] == {"1": 4, "2": 4, "4": 1}
+    assert s["irregular_corners"] == 0 and s["corners_matched"] is True
+    assert s["corner_match_distance"] <= 1e-6 * sheet_run["diagonal"]
+    assert s["max_angle_deg_regular"] == pytest.approx(s["max_angle_deg"])
+    assert s["max_angle_deg_near_irregular_corners"] is None and s["c0_fallback"] == []
+    centre = next(c["id"] for c in report["corners"] if c["valence"] == 4)
+    for e in report["edges"]:  # every seam of the sheet runs from the centre to the rim
+        assert centre in e["corners"] and None not in e["corners"]
 
 
 def test_iges_reads_back_with_the_same_faces(sheet_run: dict[str, Any]) -> None:
@@ -464,3 +480,111 @@ def test_sample_cylinder_matches_the_true_surface(tmp_path: Path) -> None:
         (0, 1), (2, 3), (4, 5), (6, 7),          # along the axis: the two rows of one column
         (0, 2), (1, 3), (2, 4), (3, 5), (4, 6), (5, 7), (0, 6), (1, 7),  # around
     }
+
+
+# --------------------------------------------------------------------------- C1 seams by corner
+def _c1_run(tmp_path_factory: pytest.TempPathFactory, name: str) -> dict[str, Any]:
+    """One ``--continuity c1`` run on a sample shape, with the report and the summary."""
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from pde2cad import samples
+
+    folder = tmp_path_factory.mktemp(name)
+    cloud = getattr(samples, name)(20000)
+    path = write_ply(folder / f"{name}.ply", cloud.points, {"label": cloud.labels.astype(float)})
+    out = outputs(folder)
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with redirect_stdout(stdout), redirect_stderr(stderr):
+        code = main(["reconstruct", str(path), "-o", str(out["step"]), "--report",
+                     str(out["report"]), "--continuity", "c1"])
+    assert code == 0, stderr.getvalue()
+    return {"report": json.loads(out["report"].read_text()), "stdout": stdout.getvalue(),
+            "step": out["step"]}
+
+
+@pytest.fixture(scope="module")
+def sphere6_c1(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    return _c1_run(tmp_path_factory, "sphere6")
+
+
+@pytest.fixture(scope="module")
+def torus_c1(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    return _c1_run(tmp_path_factory, "torus")
+
+
+def test_sphere6_reports_its_three_patch_corners_apart(sphere6_c1: dict[str, Any]) -> None:
+    report = sphere6_c1["report"]
+    s = report["summary"]
+    assert s["irregular_corners"] == 8 and s["irregular_valences"] == {"3": 8}
+    assert s["corner_valences"] == {"3": 8} and s["corners_matched"] is True
+    assert len(report["corners"]) == 8 and not any(c["regular"] for c in report["corners"])
+    regular, near = s["max_angle_deg_regular"], s["max_angle_deg_near_irregular_corners"]
+    # The kink lives next to the corners where no edge pairing exists; it stays small.
+    assert 0.0 <= regular < near < 2.0
+    assert max(regular, near) == pytest.approx(s["max_angle_deg"])
+    assert s["c0_fallback"] == []
+    # Every seam runs between two of the eight corners, and is split the same way.
+    for e in report["edges"]:
+        assert None not in e["corners"] and e["corners"][0] != e["corners"][1]
+        assert 0.1 <= e["near_fraction"] <= 0.5
+        assert e["max_angle_deg_regular"] <= regular and e["max_angle_deg_near_irregular"] <= near
+    assert {frozenset(e["corners"]) for e in report["edges"]} == {
+        frozenset(k) for k in _network_edges(report)
+    }
+    text = sphere6_c1["stdout"]
+    assert "away from 8 three-patch corners" in text and "near them" in text
+    assert "max normal angle" in text and "kept C0" not in text
+
+
+def _network_edges(report: dict[str, Any]) -> set[tuple[int, int]]:
+    """Pairs of corners 0..7 that are one cube edge apart (same on the six-patch sphere)."""
+    xyz = np.array([c["xyz"] for c in report["corners"]])
+    d = np.linalg.norm(xyz[:, None] - xyz[None], axis=2)
+    step = np.sort(d[d > 0])[0]
+    return {(i, j) for i in range(8) for j in range(i + 1, 8) if d[i, j] < 1.2 * step}
+
+
+def test_torus_c1_is_smooth_at_every_seam(torus_c1: dict[str, Any]) -> None:
+    report = torus_c1["report"]
+    s = report["summary"]
+    assert s["irregular_corners"] == 0 and s["corner_valences"] == {"4": 16}
+    assert s["max_angle_deg_regular"] <= 0.05
+    assert s["max_angle_deg_near_irregular_corners"] is None
+    assert s["max_angle_deg_regular"] == pytest.approx(s["max_angle_deg"])
+    assert s["corners_matched"] is True and s["c0_fallback"] == []
+    assert all(e["max_angle_deg_near_irregular"] is None for e in report["edges"])
+    text = torus_c1["stdout"]
+    assert "every corner regular" in text and "three-patch" not in text
+    assert "every corner regular" not in "\n".join(_summary_of(report, "c0"))
+
+
+def _summary_of(report: dict[str, Any], continuity: str) -> list[str]:
+    from pde2cad.report import summary_lines
+
+    return summary_lines({**report, "settings": {**report["settings"], "continuity": continuity}})
+
+
+def test_summary_names_c0_fallback_patches_and_unmatched_corners() -> None:
+    from pde2cad.report import summary_lines
+
+    summary = {
+        "n_faces": 9, "n_shells": 1, "solid": False, "closed": False, "valid": True,
+        "shared_edges": 12, "free_edges": 12, "max_gap": 0.0, "max_gap_rel": 0.0,
+        "max_angle_deg": 0.4, "mean_error_rel": 1e-4, "max_error_rel": 1e-3, "diagonal": 2.0,
+        "faces_matched": True, "face_match_distance": 0.0, "c0_fallback": [3, 7],
+        "irregular_corners": 3, "irregular_valences": {"3": 2, "5": 1},
+        "corner_valences": {"3": 2, "4": 4, "5": 1}, "max_angle_deg_regular": 0.0123,
+        "max_angle_deg_near_irregular_corners": 0.4, "corners_matched": False,
+        "corner_match_distance": 0.01,
+    }  # fmt: skip
+    text = "\n".join(summary_lines({"summary": summary}))
+    assert "C1: patches 3, 7 kept C0 (3-sided or their C1 fit was worse)" in text
+    assert ("seams: max normal angle 0.012 deg away from 2 three-patch and 1 five-patch "
+            "corners, 0.4 deg near them") in text
+    assert "could not all be matched to network corners" in text
+    # An old-style summary (no network information) still prints.
+    for key in ("c0_fallback", "irregular_corners", "corners_matched"):
+        summary.pop(key)
+    text = "\n".join(summary_lines({"summary": summary}))
+    assert "max normal angle 0.4 deg" in text and "kept C0" not in text and "away" not in text

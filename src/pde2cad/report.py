@@ -21,6 +21,20 @@ from numpy.typing import NDArray
 #: A read-back face whose centre is farther than this (x diagonal) from every fitted
 #: surface's centre is not one of ours: the matching is then reported as unreliable.
 MATCH_TOLERANCE = 1e-4
+#: A read-back edge end is the network corner nearest to it when within this (x diagonal):
+#: ten times the sewing tolerance (sewing may merge vertices up to that far apart).
+CORNER_MATCH_TOLERANCE = 1e-5
+#: An edge sample is "near" an irregular corner (one where three or five patches meet, where
+#: G1 cannot be had by pairing edges) when its straight-line distance to that corner is at
+#: most this fraction of the edge's length (the polyline through its samples) -- or one span
+#: of the edge's curve when that is longer: the end span is the part of the seam that the
+#: corner's ribbon construction controls, and the kink fills it (on the C1 six-patch sphere,
+#: 4 spans per edge, it peaks at 12-15 % of the length and drops to ~0 at the span break).
+#: Elsewhere the C1 construction applies and a smooth shape must show (almost) no kink.
+NEAR_CORNER_FRACTION = 0.1
+#: Samples per shared edge when measuring the read-back shape (the ends get the finest
+#: look: with 40 uniform samples about four lie within 10 % of each end).
+SEAM_SAMPLES = 40
 
 
 def surface_centres(surfaces: Mapping[int, Any], labels: Sequence[int]) -> NDArray[np.float64]:
@@ -79,7 +93,7 @@ def build_report(
     input_info: Mapping[str, Any] | None = None,
     settings: Mapping[str, Any] | None = None,
     timings: Mapping[str, float] | None = None,
-    samples: int = 20,
+    samples: int = SEAM_SAMPLES,
     orthogonal: bool = True,
 ) -> dict[str, Any]:
     """Read ``step_path`` back, measure it and describe the reconstruction ``rec``.
@@ -108,14 +122,31 @@ def build_report(
     dict
         JSON-serialisable: ``input``, ``settings``, ``summary``, ``edges`` (per shared edge:
         the two face labels, max gap absolute and relative to the diagonal, max normal angle
-        in degrees), ``patches`` (per label: points, terms, errors absolute and relative) and
+        in degrees, the network corners at its ends and its max normal angle away from and
+        near irregular corners), ``corners`` (per network corner: position, valence, whether
+        regular), ``patches`` (per label: points, terms, errors absolute and relative) and
         ``timings``.
+
+    Notes
+    -----
+    Seam angles are split by the network's corners (``rec.network``). A corner is *irregular*
+    when its edges do not pair up (``network.regular[c]`` false: three or five patches meet,
+    e.g. the eight corners of a six-patch sphere); G1 there is the vertex-enclosure problem and
+    a kink near it is expected. A sample of a shared edge is *near* an irregular corner when its
+    distance to it is at most ``NEAR_CORNER_FRACTION`` (10 %) of the edge's length, or one span
+    of the edge's curve (``network.spans``) when longer (per edge ``near_fraction``). The summary
+    gives ``max_angle_deg_regular`` over all other samples (on a smooth shape fitted C1 this is
+    the number that should be ~0; None if every sample is near one) and
+    ``max_angle_deg_near_irregular_corners`` (None when there is no such sample), with ``irregular_corners``, ``corner_valences`` (patches meeting at a
+    corner -> how many corners) and ``c0_fallback``. Read-back edge ends are matched to the
+    network corners by position (``CORNER_MATCH_TOLERANCE`` x diagonal); ``corners_matched``
+    says whether every end found its corner. Without a network all these are None.
     """
     from pde2cad.occ import measure, read_step
     from pde2cad.occ.probe import face_centres
 
     shape = read_step(step_path, units=units)
-    m = measure(shape, samples=samples)
+    m = measure(shape, samples=samples, profile=True)
     diagonal = float(rec.diagonal) if rec.diagonal > 0 else 1.0
     labels = [int(label) for label in rec.labels]
     face_labels, worst = match_faces(
@@ -123,21 +154,48 @@ def build_report(
     )
     matched = worst <= MATCH_TOLERANCE * diagonal and len(face_labels) == len(labels)
 
+    network = getattr(rec, "network", None)
+    corners = corner_info(network)
+    irregular = np.array(
+        [c["xyz"] for c in corners if not c["regular"]], dtype=float
+    ).reshape(-1, 3)
+    corner_xyz = np.array([c["xyz"] for c in corners], dtype=float).reshape(-1, 3)
+
     edges = []
+    split = _AngleSplit()
+    worst_corner = 0.0
     for e in m["edges"]:
         i, j = e["faces"]
         pair = [face_labels[i], face_labels[j]]
         if all(p is not None for p in pair):
             pair = sorted(pair)  # type: ignore[type-var]
-        edges.append(
-            {
-                "labels": pair,
-                "faces": [int(i), int(j)],
-                "max_gap": float(e["max_gap"]),
-                "max_gap_rel": float(e["max_gap"]) / diagonal,
-                "max_angle_deg": float(e["max_angle_deg"]),
-            }
-        )
+        entry: dict[str, Any] = {
+            "labels": pair,
+            "faces": [int(i), int(j)],
+            "max_gap": float(e["max_gap"]),
+            "max_gap_rel": float(e["max_gap"]) / diagonal,
+            "max_angle_deg": float(e["max_angle_deg"]),
+        }
+        if network is not None:
+            points = np.asarray(e["profile"]["points"], dtype=float)
+            angles = np.asarray(e["profile"]["angles_deg"], dtype=float)
+            ends, dist = match_corners(
+                points[[0, -1]], corner_xyz, CORNER_MATCH_TOLERANCE * diagonal
+            )
+            worst_corner = max(worst_corner, dist)
+            fraction = NEAR_CORNER_FRACTION
+            a, b = ends
+            if a is not None and b is not None:
+                spans = (getattr(network, "spans", None) or {}).get((min(a, b), max(a, b)))
+                if spans:
+                    fraction = max(fraction, 1.0 / int(spans))
+            near = near_corners(points, irregular, fraction)
+            entry["corners"] = ends
+            entry["near_fraction"] = fraction
+            entry["max_angle_deg_regular"] = _nanmax(angles[~near])
+            entry["max_angle_deg_near_irregular"] = _nanmax(angles[near])
+            split.add(entry)
+        edges.append(entry)
     edges.sort(key=lambda e: (e["labels"][0] is None, e["labels"]))
 
     patches = []
@@ -167,6 +225,7 @@ def build_report(
         "max_gap": float(m["max_gap"]),
         "max_gap_rel": float(m["max_gap"]) / diagonal,
         "max_angle_deg": float(m["max_angle_deg"]),
+        "seam_samples": int(samples),
         "valid": bool(m["valid"]),
         "closed": bool(m["closed"]),
         "solid": bool(info.is_solid),
@@ -175,6 +234,8 @@ def build_report(
         "max_error_rel": max((p.get("max_rel", 0.0) for p in patches), default=0.0),
         "faces_matched": bool(matched),
         "face_match_distance": float(worst),
+        "c0_fallback": sorted(int(label) for label in getattr(rec, "c0_fallback", None) or []),
+        **_corner_summary(network, corners, split, worst_corner, diagonal),
     }
     all_timings = {k: float(v) for k, v in getattr(rec, "timings", {}).items()}
     all_timings.update({k: float(v) for k, v in (timings or {}).items()})
@@ -183,8 +244,108 @@ def build_report(
         "settings": dict(settings or {}),
         "summary": summary,
         "edges": edges,
+        "corners": corners,
         "patches": patches,
         "timings": all_timings,
+    }
+
+
+def corner_info(network: Any) -> list[dict[str, Any]]:
+    """Per network corner: ``id``, ``xyz``, ``valence`` (patches whose side loop passes
+    through it) and ``regular`` (its edges pair up; see :class:`EdgeNetwork`)."""
+    if network is None:
+        return []
+    xyz = np.asarray(network.corners, dtype=float).reshape(-1, 3)
+    valence = np.zeros(len(xyz), dtype=int)
+    for ids in network.loops.values():
+        for c in set(int(c) for c in ids):
+            valence[c] += 1
+    return [
+        {
+            "id": c,
+            "xyz": [float(v) for v in xyz[c]],
+            "valence": int(valence[c]),
+            "regular": bool(network.regular.get(c, True)),
+        }
+        for c in range(len(xyz))
+    ]
+
+
+def match_corners(
+    ends: NDArray[np.float64], corners: NDArray[np.float64], tolerance: float
+) -> tuple[list[int | None], float]:
+    """The corner id nearest each of ``ends`` (None when farther than ``tolerance``), and the
+    largest nearest distance."""
+    if len(corners) == 0:
+        return [None] * len(ends), 0.0
+    dist = np.linalg.norm(ends[:, None, :] - corners[None, :, :], axis=2)
+    nearest = dist.argmin(axis=1)
+    best = dist[np.arange(len(ends)), nearest]
+    ids = [int(c) if d <= tolerance else None for c, d in zip(nearest, best, strict=True)]
+    return ids, float(best.max()) if len(best) else 0.0
+
+
+def near_corners(
+    points: NDArray[np.float64], corners: NDArray[np.float64], fraction: float
+) -> NDArray[np.bool_]:
+    """Which of an edge's sample ``points`` (in order along it) lie within ``fraction`` of the
+    edge's length (polyline through the samples) of any of ``corners``."""
+    if len(corners) == 0 or len(points) == 0:
+        return np.zeros(len(points), dtype=bool)
+    length = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+    dist = np.linalg.norm(points[:, None, :] - corners[None, :, :], axis=2).min(axis=1)
+    return np.asarray(dist <= fraction * length)
+
+
+def _nanmax(values: NDArray[np.float64]) -> float | None:
+    finite = values[~np.isnan(values)]
+    return float(finite.max()) if len(finite) else None
+
+
+class _AngleSplit:
+    """Running maxima of the per-edge split angles."""
+
+    def __init__(self) -> None:
+        self.regular: float | None = None
+        self.near: float | None = None
+
+    def add(self, edge: Mapping[str, Any]) -> None:
+        for attr, key in (("regular", "max_angle_deg_regular"),
+                          ("near", "max_angle_deg_near_irregular")):  # fmt: skip
+            value = edge[key]
+            if value is not None:
+                old = getattr(self, attr)
+                setattr(self, attr, value if old is None else max(old, value))
+
+
+def _corner_summary(
+    network: Any, corners: list[dict[str, Any]], split: _AngleSplit, worst: float,
+    diagonal: float,
+) -> dict[str, Any]:
+    if network is None:
+        return {
+            "irregular_corners": None, "corner_valences": None, "irregular_valences": None,
+            "max_angle_deg_regular": None, "max_angle_deg_near_irregular_corners": None,
+            "corners_matched": None, "corner_match_distance": None,
+        }  # fmt: skip
+    valences: dict[str, int] = {}
+    irregular: dict[str, int] = {}
+    for c in sorted(corners, key=lambda c: c["valence"]):
+        key = str(c["valence"])
+        valences[key] = valences.get(key, 0) + 1
+        if not c["regular"]:
+            irregular[key] = irregular.get(key, 0) + 1
+    return {
+        "irregular_corners": sum(irregular.values()),
+        "corner_valences": valences,
+        "irregular_valences": irregular,
+        # None when every seam sample is near an irregular corner; 0 without shared edges.
+        "max_angle_deg_regular": (
+            split.regular if split.regular is not None or split.near is not None else 0.0
+        ),
+        "max_angle_deg_near_irregular_corners": split.near,
+        "corners_matched": bool(worst <= CORNER_MATCH_TOLERANCE * diagonal),
+        "corner_match_distance": float(worst),
     }
 
 
@@ -201,12 +362,61 @@ def summary_lines(report: Mapping[str, Any]) -> list[str]:
         f"fit: worst patch mean error {s['mean_error_rel']:.2g} x diagonal, "
         f"max {s['max_error_rel']:.2g} x diagonal (diagonal {s['diagonal']:.4g})",
     ]
+    irregular = s.get("irregular_corners")
+    if irregular:
+        near = s.get("max_angle_deg_near_irregular_corners")
+        near_text = "n/a" if near is None else f"{near:.2g} deg"
+        away = s.get("max_angle_deg_regular")
+        away_text = "n/a" if away is None else f"{away:.3f} deg"
+        lines.append(
+            f"seams: max normal angle {away_text} away from "
+            f"{_corner_kinds(s.get('irregular_valences') or {}, irregular)}, "
+            f"{near_text} near them"
+        )
+    elif irregular == 0 and s.get("corner_valences") and _c1(report):
+        # Only worth a line with C1: the angle is then the one that must stay ~0.
+        lines.append(
+            "seams: every corner regular (four patches, or two at the open boundary), "
+            f"max normal angle {s['max_angle_deg_regular']:.3f} deg"
+        )
+    if s.get("corners_matched") is False:
+        lines.append(
+            "note: read-back edge ends could not all be matched to network corners "
+            f"(off by {s['corner_match_distance']:.3g}); the near-corner split may be off"
+        )
+    fallback = s.get("c0_fallback") or []
+    if fallback:
+        word = "patch" if len(fallback) == 1 else "patches"
+        lines.append(
+            f"C1: {word} {', '.join(map(str, fallback))} kept C0 (3-sided or their C1 fit "
+            "was worse)"
+        )
     if not s["faces_matched"]:
         lines.append(
             "note: read-back faces could not all be matched to segments "
             f"(off by {s['face_match_distance']:.3g}); edge labels may be missing"
         )
     return lines
+
+
+def _c1(report: Mapping[str, Any]) -> bool:
+    settings = report.get("settings") or {}
+    return str(settings.get("continuity", "")).lower() == "c1"
+
+
+_COUNT_WORDS = {1: "one", 2: "two", 3: "three", 4: "four", 5: "five", 6: "six"}
+
+
+def _corner_kinds(valences: Mapping[str, int], total: int) -> str:
+    """E.g. ``"8 three-patch corners"`` or ``"4 three-patch and 2 five-patch corners"``."""
+    parts = [
+        f"{count} {_COUNT_WORDS.get(int(v), v)}-patch"
+        for v, count in sorted(valences.items(), key=lambda kv: int(kv[0]))
+    ]
+    if not parts:
+        return f"{total} irregular corners"
+    text = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+    return text + (" corner" if total == 1 else " corners")
 
 
 def json_safe(value: Any) -> Any:
@@ -225,4 +435,13 @@ def json_safe(value: Any) -> Any:
     return value
 
 
-__all__ = ["build_report", "json_safe", "match_faces", "summary_lines", "surface_centres"]
+__all__ = [
+    "build_report",
+    "corner_info",
+    "json_safe",
+    "match_corners",
+    "match_faces",
+    "near_corners",
+    "summary_lines",
+    "surface_centres",
+]

@@ -19,6 +19,7 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from OCP.BRep import BRep_Tool
 from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d, BRepAdaptor_Surface
 from OCP.BRepCheck import BRepCheck_Analyzer
@@ -86,27 +87,32 @@ class _FaceSampler:
 
 def _edge_deviation(
     edge: TopoDS_Edge, f1: TopoDS_Face, f2: TopoDS_Face, samples: int
-) -> tuple[float, float]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Edge points (samples, 3), gaps (samples,) and normal angles in degrees (samples,).
+
+    An angle is NaN where either face has no defined normal (e.g. at a collapsed pole).
+    """
     curve = BRepAdaptor_Curve(edge)
     t0, t1 = curve.FirstParameter(), curve.LastParameter()
     s1, s2 = _FaceSampler(f1, edge), _FaceSampler(f2, edge)
-    max_gap = 0.0
-    max_angle = 0.0
-    for t in np.linspace(t0, t1, samples):
+    xyz = np.empty((samples, 3))
+    gaps = np.empty(samples)
+    angles = np.full(samples, np.nan)
+    for k, t in enumerate(np.linspace(t0, t1, samples)):
         point = curve.Value(float(t))
+        xyz[k] = point.X(), point.Y(), point.Z()
         p1, n1 = s1.sample(float(t), point)
         p2, n2 = s2.sample(float(t), point)
-        max_gap = max(max_gap, float(np.linalg.norm(p1 - p2)))
+        gaps[k] = float(np.linalg.norm(p1 - p2))
         if n1 is not None and n2 is not None:
             # atan2 of |cross| and dot keeps full precision near 0 deg, where arccos of a
             # dot product close to 1 would lose about half the digits.
             sin = float(np.linalg.norm(np.cross(n1, n2)))
-            angle = math.degrees(math.atan2(sin, float(n1 @ n2)))
-            max_angle = max(max_angle, angle)
-    return max_gap, max_angle
+            angles[k] = math.degrees(math.atan2(sin, float(n1 @ n2)))
+    return xyz, gaps, angles
 
 
-def measure(shape: TopoDS_Shape, samples: int = 20) -> dict[str, Any]:
+def measure(shape: TopoDS_Shape, samples: int = 20, *, profile: bool = False) -> dict[str, Any]:
     """Measure position gaps and normal angles across every edge shared by two faces.
 
     Parameters
@@ -115,6 +121,9 @@ def measure(shape: TopoDS_Shape, samples: int = 20) -> dict[str, Any]:
         Shell, solid or compound, typically read back from STEP/IGES.
     samples : int
         Points per edge (including both ends), at least 2.
+    profile : bool
+        Also return, per shared edge, the samples themselves (see below). Off by default:
+        the profile costs nothing extra to compute but makes the result larger.
 
     Returns
     -------
@@ -152,14 +161,16 @@ def measure(shape: TopoDS_Shape, samples: int = 20) -> dict[str, Any]:
             continue
         if len(faces) > 2:
             nonmanifold += 1
-        gap, angle = _edge_deviation(edge, faces[0], faces[1], samples)
-        edges.append(
-            {
-                "faces": (face_map.FindIndex(faces[0]) - 1, face_map.FindIndex(faces[1]) - 1),
-                "max_gap": gap,
-                "max_angle_deg": angle,
-            }
-        )
+        xyz, gaps, angles = _edge_deviation(edge, faces[0], faces[1], samples)
+        defined = angles[~np.isnan(angles)]
+        entry: dict[str, Any] = {
+            "faces": (face_map.FindIndex(faces[0]) - 1, face_map.FindIndex(faces[1]) - 1),
+            "max_gap": float(gaps.max()),
+            "max_angle_deg": float(defined.max()) if len(defined) else 0.0,
+        }
+        if profile:
+            entry["profile"] = {"points": xyz, "angles_deg": angles, "gaps": gaps}
+        edges.append(entry)
 
     shells = []
     explorer = TopExp_Explorer(shape, TopAbs_SHELL)
