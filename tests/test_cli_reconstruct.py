@@ -121,7 +121,8 @@ def test_report_matches_a_fresh_measure(sheet_run: dict[str, Any]) -> None:
     assert [p["label"] for p in patches] == [0, 1, 2, 3]
     assert sum(p["points"] for p in patches) == sheet_run["n_points"]
     for p in patches:
-        assert p["terms"] == [6, 6] and p["sides"] == 4
+        # Default --terms auto: M = N chosen per patch by hold-out validation.
+        assert p["terms"][0] == p["terms"][1] and 6 <= p["terms"][0] <= 16 and p["sides"] == 4
         assert 0.0 < p["mean"] <= p["rms"] <= p["max"] <= 1e-3 * diagonal
         assert p["mean_rel"] == pytest.approx(p["mean"] / diagonal)
         assert p["max_rel"] == pytest.approx(p["max"] / diagonal)
@@ -130,7 +131,7 @@ def test_report_matches_a_fresh_measure(sheet_run: dict[str, Any]) -> None:
     assert s["max_error_rel"] == pytest.approx(max(p["max_rel"] for p in patches))
     assert report["input"]["points"] == sheet_run["n_points"]
     assert report["input"]["segments"] == 4 and report["input"]["labels_from"] == "scalar_Label"
-    assert report["settings"]["terms"] == 6 and report["settings"]["units"] == "MM"
+    assert report["settings"]["terms"] == "auto" and report["settings"]["units"] == "MM"
     assert report["outputs"]["step"] == str(sheet_run["out"]["step"])
     assert all(isinstance(v, float) and v >= 0 for v in report["timings"].values())
     assert report["timings"]["total"] >= report["timings"]["reconstruct"]
@@ -413,7 +414,7 @@ def test_output_into_a_missing_folder_exits_3(tmp_path: Path,
 @pytest.mark.parametrize(
     "option, value",
     [("--tolerance", "-1"), ("--tolerance", "nan"), ("--tolerance", "0"),
-     ("--cad-tolerance", "inf"), ("--voxel", "-0.1"), ("--terms", "0"), ("--terms", "2.5"),
+     ("--cad-tolerance", "inf"), ("--voxel", "-0.1"), ("--terms", "0"), ("--terms", "2.5"), ("--terms", "many"),
      ("--units", "furlong"), ("--continuity", "c2")],
 )
 def test_nonsense_numbers_are_refused_by_the_parser(

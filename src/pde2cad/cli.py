@@ -122,11 +122,13 @@ _LABEL_PROPERTIES = (
 _MAX_TERMS = 40
 
 
-def _terms(text: str) -> int:
+def _terms(text: str) -> int | str:
+    if text == "auto":
+        return "auto"
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number or 'auto'") from None
     if not 1 <= value <= _MAX_TERMS:
         raise argparse.ArgumentTypeError(f"must be a whole number from 1 to {_MAX_TERMS}, got {text}")
     return value
@@ -150,8 +152,9 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
                    "a PLY property such as 'label' or 'scalar_Label'")
     p.add_argument("--continuity", choices=["c0", "c1"], default="c0",
                    help="join across shared edges: c0 (position) or c1 (tangent plane); default c0")
-    p.add_argument("--terms", type=_terms, default=6, metavar="M",
-                   help="deformation terms per patch direction, M = N (default 6)")
+    p.add_argument("--terms", type=_terms, default="auto", metavar="M",
+                   help="deformation terms per patch direction, M = N, or 'auto' (default): "
+                   "per patch, the count from 6 to 16 that best predicts held-out points")
     p.add_argument("--tolerance", type=_positive, metavar="T",
                    help="edge-curve fit tolerance in point units (default: from the noise)")
     p.add_argument("--cad-tolerance", type=_positive, metavar="T",

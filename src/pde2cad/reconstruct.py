@@ -201,9 +201,11 @@ def reconstruct(
                 continue
             c0 = patches[label]
             try:
-                # Same points and sides as the C0 fit: reuse its bilinear parameters.
+                # Same points and sides as the C0 fit: reuse its bilinear parameters, and
+                # its automatic term count (the same shape detail on the same points).
+                m1, n1 = (c0.deformation.m, c0.deformation.n) if m == "auto" else (m, n)
                 c1 = fit_patch(
-                    c0.points, continuity="c1", m=m, n=n, tolerance=tolerance,
+                    c0.points, continuity="c1", m=m1, n=n1, tolerance=tolerance,
                     boundary=c0.sides, ribbons=ribbons[label], params=c0.params,
                     outside=c0.outside,
                 )

@@ -52,7 +52,7 @@ AUTO_RIDGE = 1e-6
 AUTO_TERMS = (6, 8, 10, 12, 14, 16)
 #: Share of the points held out to score each candidate, and the largest sample scored.
 AUTO_HOLDOUT = 0.25
-AUTO_SAMPLE = 40_000
+AUTO_SAMPLE = 20_000
 #: Fewest training points per unknown of a candidate.
 AUTO_POINTS_PER_TERM = 4
 #: The smallest candidate whose held-out RMS error is within this factor of the best wins.
