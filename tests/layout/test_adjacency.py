@@ -7,6 +7,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from pde2cad import samples
 from pde2cad.errors import InputError
 from pde2cad.layout import Layout, build_layout
 
@@ -148,3 +149,58 @@ def test_random_noisy_samples() -> None:
     assert len(layout.corners) == 9
     assert cKDTree(layout.corners[:, :2]).query(truth)[0].max() < 0.02 * np.sqrt(8.0)
     assert all(len(w) == 4 for w in layout.segment_corners.values())
+
+
+def open_shape_corners(shape: str) -> NDArray[np.float64]:
+    """True corners of the ``samples`` cylinder, pot and sheet (C, 3)."""
+    seams = np.arange(4) * np.pi / 2
+    if shape == "cylinder":
+        return np.array([[np.cos(a), np.sin(a), z] for a in seams for z in (0.0, 1.0, 2.0)])
+    if shape == "pot":
+        z = np.array([0.0, 0.8, 1.6])
+        r = 0.8 + 0.3 * np.sin(np.pi * z / 1.2) - 0.1 * z
+        return np.array(
+            [[ri * np.cos(a), ri * np.sin(a), zi] for a in seams for zi, ri in zip(z, r)]
+        )
+    xy = np.array([[x, y] for x in (0.0, 1.0, 2.0) for y in (0.0, 1.0, 2.0)])
+    return np.column_stack([xy, 0.1 * np.sin(xy[:, 0]) * np.sin(xy[:, 1])])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(("shape", "n_open"), [("cylinder", 8), ("pot", 4), ("sheet", 8)])
+def test_noisy_open_boundary(shape: str, n_open: int, seed: int) -> None:
+    # Noise of 0.5 % of the diagonal makes the alpha shape along the open boundary wobble by
+    # up to ~40 degrees over +-perimeter/32: no extra corners there, and none lost.
+    cloud = samples.SHAPES[shape](20_000, noise=0.005, seed=seed)
+    layout = build_layout(cloud.points, cloud.labels)  # checks 3-4 corners per segment
+    truth = open_shape_corners(shape)
+    assert_corners(layout, truth, 0.03 * cloud.diagonal)
+    assert all(len(w) == 4 for w in layout.segment_corners.values())
+    # Corners on the rims (a border meets the open boundary) and the sheet's outer corners.
+    assert layout.open_corners is not None and int(layout.open_corners.sum()) == n_open
+    z = layout.corners[layout.open_corners, 2]
+    if shape == "cylinder":  # both rims
+        assert np.minimum(np.abs(z), np.abs(z - 2.0)).max() < 0.05
+    elif shape == "pot":  # the top rim; the bottom is closed
+        assert np.abs(z - 1.6).max() < 0.05
+    else:  # all but the centre
+        centre = np.argmin(np.linalg.norm(layout.corners[:, :2] - 1.0, axis=1))
+        assert not layout.open_corners[centre]
+
+
+@pytest.mark.parametrize(
+    ("shape", "n_points", "noise", "n_corners"),
+    [("torus", 20_000, 0.005, 16), ("torus", 10_000, 0.003, 16), ("sphere6", 5_000, 0.002, 8),
+     ("sphere6", 20_000, 0.005, 8)],
+)
+def test_noisy_closed_shapes_keep_their_corners(
+    shape: str, n_points: int, noise: float, n_corners: int
+) -> None:
+    # No border kinks from noise (nor from the projection of the torus's inner side), and
+    # every junction found, including one that no point's neighbourhood spans (sphere6 5000:
+    # a sparse spot next to it).
+    cloud = samples.SHAPES[shape](n_points, noise=noise, seed=0)
+    layout = build_layout(cloud.points, cloud.labels)
+    assert len(layout.corners) == n_corners
+    assert all(len(w) == 4 for w in layout.segment_corners.values())
+    assert layout.open_corners is not None and not layout.open_corners.any()

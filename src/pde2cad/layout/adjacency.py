@@ -21,13 +21,21 @@ that this needs, from the points alone:
    either state shorter than ``RUN_FACTOR`` x r of arc are noise (the alpha shape dips up to
    ~2.5 r into a dense random sample, between points with such a neighbour) and are flipped.
 4. **Corners.** Candidates are (a) points whose neighbourhood holds >= 3 labels (where borders
-   of different pairs meet), (b) loop points where a segment's loop switches between open
-   boundary and border (a border meets the open boundary) and (c) sharp turns of a loop
-   (turning angle over perimeter/32 of arc length >= ``CORNER_ANGLE``: outer corners of the
-   cloud, and kinks of a border). Candidates closer than ``CLUSTER_FACTOR`` x the radius are
-   clustered (``query_pairs`` + connected components); each cluster gives one corner, its
-   centroid moved to the nearest cloud point. A segment's corners are those within
-   ``CLUSTER_FACTOR`` x radius of one of its points.
+   of different pairs meet; where a sparse spot leaves no such point: points whose
+   neighbourhood holds 2 labels next to one holding another 2), (b) loop points where a
+   segment's loop switches between open boundary and border (a border meets the open
+   boundary) and (c) sharp turns of a loop (turning angle over +-perimeter/``TURN_STEPS`` of
+   arc length >= ``CORNER_ANGLE``: outer corners of the cloud, and kinks of a border). The
+   alpha shape of a noisy cloud wobbles, so a turn must persist over ``COARSE_TURN`` x that
+   arc; a turn on a border must also be one of the loop on its other side (or of two other
+   loops: a junction that (a) missed); and a turn within ``BORDER_SPAN`` x r of an (a) or
+   (b) candidate is dropped (it is that corner, or a kink that would merge into it).
+   Candidates closer than ``CLUSTER_FACTOR`` x the radius are clustered (``query_pairs`` +
+   connected components); each cluster gives one corner, its centroid moved to the nearest
+   cloud point. A segment's corners are those within ``CLUSTER_FACTOR`` x radius of one of
+   its points. A corner whose cluster holds a (b) candidate or a turn of an open run lies on
+   the open boundary (:attr:`Layout.open_corners`); the other corners of two segments are
+   kinks of a border, no patch corners.
 
 A segment falls apart when its points' voxels (side r) form several 26-connected groups of
 more than ``COMPONENT_SHARE`` of its points; pieces closer than ~3.5 r count as joined.
@@ -68,9 +76,14 @@ BORDER_SPAN = 4.0
 CLUSTER_FACTOR = 2.5
 #: A loop point is a sharp turn when the loop turns by at least this many degrees over
 #: +- perimeter / TURN_STEPS of arc length (a 90-degree corner turns 90, the corners of a
-#: cube-sphere face 60).
+#: cube-sphere face 60) ...
 CORNER_ANGLE = 40.0
 TURN_STEPS = 32
+#: ... and over COARSE_TURN x that arc too. Along the open boundary of a noisy cloud (noise
+#: 0.5 % of the diagonal, 20k points) the alpha shape wobbles by up to ~70 degrees over
+#: +- perimeter / 32 but by <= ~35 over twice that; the corners of the sample shapes turn by
+#: >= 60 (90-degree corners) or >= 45 (cube-sphere faces, curved sides) at both scales.
+COARSE_TURN = 2
 #: Connected components of a segment with less than this share of its points are ignored
 #: (stray mislabelled points), bigger ones make the segment disconnected.
 COMPONENT_SHARE = 0.01
@@ -121,6 +134,10 @@ class Layout:
         for ``points[members]`` with the default alpha), so it need not be computed again.
     tree : cKDTree or None
         The k-d tree of all the points (kept so later stages need not build another).
+    open_corners : (C,) bool or None
+        Whether each corner lies on the open boundary of the cloud: its cluster holds a (b)
+        candidate (a border meets the open boundary) or a sharp turn of an open run of a loop.
+        Corners of two segments that are not (kinks of a border) are no patch corners.
     """
 
     labels_present: NDArray[np.int64]
@@ -133,6 +150,7 @@ class Layout:
     radius: float
     loops: dict[int, NDArray[np.int64]] = field(default_factory=dict)
     tree: cKDTree | None = field(default=None, repr=False, compare=False)
+    open_corners: NDArray[np.bool_] | None = None
 
 
 # --------------------------------------------------------------------------- checks
@@ -324,16 +342,42 @@ def _drop_short_runs(
     return out
 
 
+def _turning(res: NDArray[np.float64], step: int) -> NDArray[np.float64]:
+    """Turning angle of a closed loop at each sample, over ``step`` samples either side.
+
+    Parameters
+    ----------
+    res : (m, 2) float
+        The loop, evenly resampled along its arc length, closed implicitly.
+    step : int
+        Samples either side, ``1 <= step < m``.
+
+    Returns
+    -------
+    (m,) float
+        Angle in degrees, [0, 180], between ``res[i] - res[i - step]`` and
+        ``res[i + step] - res[i]``.
+    """
+    ab = res - np.roll(res, step, axis=0)
+    bc = np.roll(res, -step, axis=0) - res
+    cross = ab[:, 0] * bc[:, 1] - ab[:, 1] * bc[:, 0]
+    return np.degrees(np.arctan2(np.abs(cross), np.einsum("ij,ij->i", ab, bc)))
+
+
 def _loop_candidates(
     pts: NDArray[np.float64],
     members: NDArray[np.int64],
     is_border: NDArray[np.bool_],
     radius: float,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+) -> tuple[
+    NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_],
+    NDArray[np.bool_], NDArray[np.int64],
+]:
     """Open-boundary loop points and corner candidates (b), (c) of one segment.
 
-    Returns indices into ``pts``: the open loop points (loop order), the candidates and the
-    whole loop.
+    Returns indices into ``pts``: the open loop points (loop order), the (b) candidates, the
+    (c) candidates (turns), whether each turn lies on the open boundary (not on a border),
+    whether it turns by CORNER_ANGLE at the coarse scale too, and the whole loop.
     """
     origin, axes = pca_frame(pts[members])
     uv = (pts[members] - origin) @ axes[:2].T
@@ -358,10 +402,7 @@ def _loop_candidates(
     s = np.arange(m) * (arc[-1] / m)
     res = np.stack([np.interp(s, arc, closed[:, d]) for d in range(2)], axis=1)
     step = max(1, m // TURN_STEPS)
-    ab = res - np.roll(res, step, axis=0)
-    bc = np.roll(res, -step, axis=0) - res
-    cross = ab[:, 0] * bc[:, 1] - ab[:, 1] * bc[:, 0]
-    angle = np.degrees(np.arctan2(np.abs(cross), np.einsum("ij,ij->i", ab, bc)))
+    angle = _turning(res, step)
     top = maximum_filter1d(angle, size=2 * step + 1, mode="wrap")
     peaks = np.flatnonzero((angle >= CORNER_ANGLE) & (angle >= top))
     # The turning-angle peak of a jagged (randomly sampled) loop wanders by a fraction of
@@ -375,8 +416,12 @@ def _loop_candidates(
     gap = np.abs(arc[None, :-1] - s[peaks, None])
     gap = np.minimum(gap, arc[-1] - gap)
     height[gap > 0.5 * step * arc[-1] / m] = -1.0
-    turns = loop[height.argmax(axis=1)] if len(peaks) else loop[:0]
-    return loop[~border], np.concatenate([trans, turns]), loop
+    tip = height.argmax(axis=1) if len(peaks) else np.zeros(0, dtype=np.int64)
+    # A corner turns over any arc around it; the alpha shape of a noisy sample wobbles by a
+    # few noise deviations over a few alpha radii, which can turn >= CORNER_ANGLE over
+    # +-step but not over COARSE_TURN x as much (where the outline continues straight).
+    coarse = _turning(res, min(COARSE_TURN * step, (m - 1) // 2))[peaks] >= CORNER_ANGLE
+    return loop[~border], trans, loop[tip], ~border[tip], coarse, loop
 
 
 # --------------------------------------------------------------------------- main
@@ -468,12 +513,28 @@ def build_layout(
     is_border = np.zeros(len(pts), dtype=bool)
     is_border[pt] = True
 
-    # (a) points whose neighbourhood (with themselves) holds >= 3 labels.
+    # (a) points whose neighbourhood (with themselves) holds >= 3 labels ...
     own = lab[near]
     hood = np.where(valid, lab[idx], own[:, None])
     hood = np.sort(np.column_stack([own, hood]), axis=1)
     n_distinct = 1 + (np.diff(hood, axis=1) != 0).sum(axis=1)
-    candidates = [np.sort(near[n_distinct >= 3])]
+    # ... or whose neighbourhood holds 2 labels and that of one of its neighbours 2 others: a
+    # sparse random sample can leave no point that sees all three segments of a junction.
+    rank = np.searchsorted(present, hood[:, [0, -1]])
+    pair = np.where(n_distinct == 2, rank[:, 0] * len(present) + rank[:, 1], -1)
+    pair_of = np.full(len(pts), -1, dtype=np.int64)
+    pair_of[near] = pair
+    other = np.where(valid, pair_of[idx], -1)
+    junction = near[n_distinct >= 3]
+    sparse = near[(pair >= 0) & ((other >= 0) & (other != pair[:, None])).any(axis=1)]
+    if junction.size and sparse.size:
+        # Only where the neighbourhoods miss the junction: next to one they would spread its
+        # candidates by a radius each way, and close junctions would chain into one.
+        far, _ = cKDTree(pts[junction]).query(
+            pts[sparse], distance_upper_bound=BORDER_SPAN * radius
+        )
+        sparse = sparse[np.isinf(far)]
+    junction = np.concatenate([junction, sparse])
 
     # (b), (c) and the open boundary from each segment's loop.
     order = np.argsort(lab, kind="stable")
@@ -481,7 +542,12 @@ def build_layout(
     open_boundary: dict[int, NDArray[np.float64]] = {}
     loops: dict[int, NDArray[np.int64]] = {}
 
-    def segment_loop(s: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    def segment_loop(
+        s: int,
+    ) -> tuple[
+        NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_],
+        NDArray[np.bool_], NDArray[np.int64],
+    ]:
         members = order[bounds[s] : bounds[s + 1]]  # increasing: the sort is stable
         try:
             return _loop_candidates(pts, members, is_border, radius)
@@ -492,13 +558,36 @@ def build_layout(
     # order and re-raises the first failing segment's error.
     workers = min(len(present), os.cpu_count() or 1, MAX_THREADS)
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-        for label, (open_pts, cand, loop) in zip(present, pool.map(segment_loop, range(len(present)))):
+        ends, turns, turns_open, turns_coarse = [], [], [], []
+        for label, (open_pts, trans, turn, turn_open, coarse, loop) in zip(
+            present, pool.map(segment_loop, range(len(present)))
+        ):
             open_boundary[int(label)] = pts[open_pts]
             loops[int(label)] = loop
-            candidates.append(cand)
-    cand = np.unique(np.concatenate(candidates))
+            ends.append(trans)
+            turns.append(turn)
+            turns_open.append(turn_open)
+            turns_coarse.append(coarse)
+    end = np.concatenate(ends)
+    fixed = np.concatenate([junction, end])  # (a) and (b)
+    turn, turn_open = _confirm_turns(
+        pts, lab, np.concatenate(turns), np.concatenate(turns_open),
+        np.concatenate(turns_coarse), CLUSTER_FACTOR * radius,
+    )
+    if fixed.size and turn.size:
+        # A turn this close to a junction or to a border's end is that corner (already a
+        # candidate) or a noise kink of a border next to it, which would merge into it and
+        # move it; either way it adds nothing.
+        far, _ = cKDTree(pts[fixed]).query(pts[turn], distance_upper_bound=BORDER_SPAN * radius)
+        turn, turn_open = turn[np.isinf(far)], turn_open[np.isinf(far)]
+    # Candidates on the open boundary: (b), and (c) on an open run of a loop.
+    cand, inverse = np.unique(np.concatenate([fixed, turn]), return_inverse=True)
+    on_open = np.r_[np.zeros(len(junction), dtype=bool), np.ones(len(end), dtype=bool), turn_open]
+    on_open = np.bincount(inverse.reshape(-1), weights=on_open, minlength=len(cand)) > 0
 
-    corners = _cluster(pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius)
+    corners, open_corners = _cluster(
+        pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius, on_open
+    )
     segment_corners = _assign(tree, lab, present, corners, CLUSTER_FACTOR * radius)
     if check:
         for label, which in segment_corners.items():
@@ -518,18 +607,49 @@ def build_layout(
         radius=radius,
         loops=loops,
         tree=tree,
+        open_corners=open_corners,
     )
+
+
+def _confirm_turns(
+    pts: NDArray[np.float64],
+    lab: NDArray[np.int64],
+    turn: NDArray[np.int64],
+    turn_open: NDArray[np.bool_],
+    coarse: NDArray[np.bool_],
+    reach: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """The (c) candidates that are corners, and whether each lies on the open boundary.
+
+    A turn of an open run must turn at the coarse scale too (``coarse``). A turn on a border
+    is a corner of the segments on both sides, so the loop of another segment must turn
+    within ``reach`` as well (noise bends one loop at a time), and at the coarse scale (the
+    projection of a strongly curved segment can bend both loops a little); or the loops of
+    two other segments must turn there: a junction of three, whatever the scale.
+    """
+    kink = np.flatnonzero(~turn_open)
+    keep = turn_open & coarse
+    if kink.size:
+        pairs = cKDTree(pts[turn[kink]]).query_pairs(reach, output_type="ndarray")
+        i = kink[np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(len(kink))])]
+        j = kink[np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(len(kink))])]
+        # Distinct labels of the border turns within reach of each (itself included).
+        seen = np.unique(np.column_stack([i, lab[turn[j]]]), axis=0)
+        n_seen = np.bincount(seen[:, 0], minlength=len(turn))
+        keep[kink] = ((n_seen[kink] >= 2) & coarse[kink]) | (n_seen[kink] >= 3)
+    return turn[keep], turn_open[keep]
 
 
 def _cluster(
     pts: NDArray[np.float64], tree: cKDTree, cand: NDArray[np.int64], dist: float,
-    merge: float = 0.0,
-) -> NDArray[np.float64]:
+    merge: float = 0.0, mark: NDArray[np.bool_] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """One corner per cluster of candidate points (single linkage within ``dist``, then
     clusters whose centroids lie within ``merge`` joined): the cloud point nearest the
-    centroid."""
+    centroid; and whether the cluster holds a candidate with ``mark`` set (default none)."""
     if not cand.size:
-        return np.zeros((0, 3))
+        return np.zeros((0, 3)), np.zeros(0, dtype=bool)
+    mark = np.zeros(len(cand), dtype=bool) if mark is None else np.asarray(mark, dtype=bool)
     pairs = cKDTree(pts[cand]).query_pairs(dist, output_type="ndarray")
     comp = _components(len(cand), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))
 
@@ -544,9 +664,10 @@ def _cluster(
         close = cKDTree(centroid).query_pairs(merge, output_type="ndarray")
         if len(close):
             joined = _components(len(centroid), close[:, 0].astype(np.int64), close[:, 1].astype(np.int64))
-            centroid = centroids(joined[comp])
+            comp = joined[comp]
+            centroid = centroids(comp)
     _, nearest = tree.query(centroid)
-    return pts[nearest]
+    return pts[nearest], np.bincount(comp, weights=mark, minlength=len(centroid)) > 0
 
 
 def _assign(

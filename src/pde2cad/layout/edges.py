@@ -171,9 +171,15 @@ def _filter_corners(
     for i, corner in enumerate(layout.corners):
         near = tree.query_ball_point(corner, reach)
         n_labels = len(np.unique(labels[near]))
-        # Several open-boundary points: a single one can be a border point whose neighbours
-        # happen to share its label (random sampling), not the open boundary.
-        near_open = open_tree is not None and len(open_tree.query_ball_point(corner, reach)) >= 3
+        if layout.open_corners is not None:
+            # The layout knows which corners lie on the open boundary (a border meeting it,
+            # or a confirmed turn of it): counting open-loop points near a rim corner missed
+            # some (the loop has a point only every ~1.3 radii there).
+            near_open = bool(layout.open_corners[i])
+        else:
+            # Several open-boundary points: a single one can be a border point whose
+            # neighbours happen to share its label (random sampling), not the open boundary.
+            near_open = open_tree is not None and len(open_tree.query_ball_point(corner, reach)) >= 3
         keep.append(n_labels >= 3 or near_open or n_labels == 1)
     keep_ids = np.flatnonzero(keep)
     new_id = {int(old): new for new, old in enumerate(keep_ids)}
