@@ -42,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from pde2cad.errors import FitError
 from pde2cad.layout.edges import EdgeNetwork, Key, key_of
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import (
@@ -140,7 +141,8 @@ def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[i
     Returns
     -------
     dict[int, Ribbons]
-        For each 4-sided segment (3-sided ones are left to a C0 fit).
+        For each 4-sided segment whose points determine its own ribbons (3-sided ones, and
+        sparse ones, are left to a C0 fit).
     """
     four = {label for label, ids in network.loops.items() if len(ids) == 4}
     # 1. Each patch's own estimate, as inward node data per loop side.
@@ -149,11 +151,17 @@ def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[i
         patch = c0_patches[label]
         bilinear = patch.base
         pts, params, outside = patch.points, patch.params, patch.outside
-        rib = estimate_cross_derivatives(
-            pts[~outside], params[~outside], bilinear.bottom, bilinear.right, bilinear.top,
-            bilinear.left, band=BAND, pieces=PIECES,
-        )
+        try:
+            rib = estimate_cross_derivatives(
+                pts[~outside], params[~outside], bilinear.bottom, bilinear.right, bilinear.top,
+                bilinear.left, band=BAND, pieces=PIECES,
+            )
+        except FitError:
+            # Too few points along a side to estimate its ribbon (sparse clouds): this patch
+            # stays C0 (the caller lists it), its neighbours use their own ribbons there.
+            continue
         own[label] = _inward(rib)
+    four = set(own)
 
     # 2. Twists: one vector per corner where the patch signs alternate (regular corners);
     # elsewhere (odd valence) no compatible value exists, so one per patch corner.
