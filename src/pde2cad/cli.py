@@ -173,6 +173,9 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
                    help="remove statistical outliers first (20 neighbours, 2 standard deviations)")
     p.add_argument("--voxel", type=_positive, metavar="SIZE",
                    help="voxel-downsample to one point per SIZE cube first (labels kept)")
+    p.add_argument("--freecad-check", action="store_true",
+                   help="also read the STEP with FreeCAD 0.20 (its own process) and report its "
+                   "validity, solids, free edges, gaps and normal angles")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary")
     p.set_defaults(run=_run_reconstruct)
 
@@ -465,7 +468,18 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
 def _summary(report: dict[str, Any]) -> list[str]:
     from pde2cad.report import summary_lines
 
-    return summary_lines(report)
+    lines = summary_lines(report)
+    fc = report.get("freecad")
+    if fc:
+        diagonal = report["summary"].get("diagonal") or 1.0
+        shape = f"{fc['n_solids']} solid(s)" if fc["n_solids"] else f"{fc['n_shells']} shell(s)"
+        lines.append(
+            f"{fc['reader']}: {'valid' if fc['valid'] else 'INVALID'}, {fc['n_faces']} faces, "
+            f"{shape}, {fc['free_edges']} free edges, max gap "
+            f"{fc['max_gap'] / diagonal:.1e} x diagonal, max normal angle "
+            f"{fc['max_angle_deg']:.3g} deg"
+        )
+    return lines
 
 
 def _write_json(staging: _Staging, target: Path, report: dict[str, Any]) -> None:
@@ -512,6 +526,14 @@ def _write_outputs(args: argparse.Namespace, rec: Any, outputs: dict[str, Path],
         ("step" if key == "output" else key): str(path) for key, path in outputs.items()
     }
     timings["check"] = time.perf_counter() - t0
+
+    if args.freecad_check:
+        from pde2cad.fc import read_back
+
+        progress.message("reading the STEP with FreeCAD")
+        t0 = time.perf_counter()
+        report["freecad"] = read_back(step)
+        timings["freecad_check"] = time.perf_counter() - t0
 
     if "preview" in outputs:
         from pde2cad.plots.preview import reconstruction_preview

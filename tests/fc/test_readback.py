@@ -47,3 +47,20 @@ def test_open_cylinder_step_in_freecad(tmp_path: Path) -> None:
 def test_missing_file_is_an_input_error(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="no such file"):
         read_back(tmp_path / "absent.step")
+
+
+def test_cli_freecad_check(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--freecad-check: FreeCAD's verdict on the written STEP lands in the report and summary."""
+    import json
+
+    from pde2cad.cli import main
+
+    root = Path(__file__).resolve().parents[2]
+    out, report = tmp_path / "torus.step", tmp_path / "torus.json"
+    code = main(["reconstruct", str(root / "examples/clouds/torus.ply"), "-o", str(out),
+                 "--continuity", "c1", "--freecad-check", "--report", str(report)])
+    assert code == 0
+    fc = json.loads(report.read_text())["freecad"]
+    assert fc["valid"] and fc["n_solids"] == 1 and fc["free_edges"] == 0
+    assert fc["max_angle_deg"] <= 0.05
+    assert "FreeCAD 0.20" in capsys.readouterr().out
