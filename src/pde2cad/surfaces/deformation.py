@@ -581,6 +581,17 @@ def _residual_pass(
     return norms, back
 
 
+def _flat_top_map(n: int) -> NDArray[np.float64]:
+    """(n + 1, n) amplitudes of ``sin(k pi v)``, k = 1..n+1, of the terms
+    ``psi_j(v) = sin(j pi v) + j (-1)^j sin(pi v)``, j = 2..n+1: zero at v = 0 and 1 like
+    every sine, and also zero slope at v = 1 (``j pi (-1)^j - j (-1)^j pi = 0``)."""
+    j = np.arange(2, n + 2)
+    out = np.zeros((n + 1, n))
+    out[j - 1, j - 2] = 1.0
+    out[0] = j * (-1.0) ** j
+    return out
+
+
 def _solve(
     r: NDArray[np.float64],
     p: NDArray[np.float64],
@@ -588,12 +599,18 @@ def _solve(
     m: int,
     n: int,
     ridge: float | None,
+    flat_top: bool = False,
 ) -> Deformation:
     """Solve the normal equations for ``M = m, N = n`` from ``data`` (call under
-    :func:`_single_threaded_blas`); see :func:`fit_deformation` for ``ridge``."""
+    :func:`_single_threaded_blas`); see :func:`fit_deformation` for ``ridge`` and
+    ``flat_top`` (which needs ``data`` accumulated for ``n + 1``)."""
     n_pts, dim = r.shape
     unknowns = m * n
-    gram, rhs = data.system(m, n)
+    gram, rhs = data.system(m, n + 1 if flat_top else n)
+    lift = None
+    if flat_top:
+        lift = np.kron(np.eye(m), _flat_top_map(n))  # full amplitudes = lift @ reduced ones
+        gram, rhs = lift.T @ gram @ lift, lift.T @ rhs
     eig = np.linalg.eigvalsh(gram)
     scale = float(np.trace(gram)) / unknowns
     # eig ratio 1e-12 is a singular-value ratio of 1e-6 for the design itself.
@@ -612,12 +629,20 @@ def _solve(
             return np.linalg.lstsq(system, b, rcond=None)[0]
 
     coef = solve(rhs)
+    n_full = n + 1 if flat_top else n
+
+    def full(c: NDArray[np.float64]) -> NDArray[np.float64]:
+        return (c if lift is None else lift @ c).reshape(m, n_full, dim)
+
     if eig[0] < 1e-6 * eig[-1]:
         # cond(A) > 1e3: the normal equations square it and lose digits, so refine once.
-        _, back = _residual_pass(r, p, coef.reshape(m, n, dim), data.kind, normal=True)
+        _, back = _residual_pass(r, p, full(coef), data.kind, normal=True)
         assert back is not None
-        coef = coef + solve(back.reshape(unknowns, dim) - ridge * scale * coef)
-    coefficients = coef.reshape(m, n, dim)
+        back = back.reshape(m * n_full, dim)
+        if lift is not None:
+            back = lift.T @ back
+        coef = coef + solve(back - ridge * scale * coef)
+    coefficients = full(coef)
     err, _ = _residual_pass(r, p, coefficients, data.kind)
     return Deformation(
         coefficients=coefficients,
@@ -636,6 +661,7 @@ def fit_deformation(
     n: int,
     kind: Kind = "c0",
     ridge: float | None = None,
+    flat_top: bool = False,
 ) -> Deformation:
     """Least-squares fit of a deformation to the base-patch residuals (Eqs. 5.18, 5.19).
 
@@ -662,6 +688,11 @@ def fit_deformation(
         uses none when the data determine every term, and ``AUTO_RIDGE`` when they nearly do
         not (fewer than 2 M N points, or a design singular-value ratio below 1e-6), which is where
         the thesis's "M N = I gives zero error" turns into oscillation. ``0`` forces none.
+    flat_top : bool
+        ``kind="c0"`` only: also zero slope across ``v = 1`` (the collapsed side of a
+        3-sided patch, where a sine term's slope, different for every u, would make the apex
+        a cone). Fitted as N terms ``sin(j pi v) + j (-1)^j sin(pi v)``, j = 2..N+1; the
+        result is an ordinary c0 deformation with ``N + 1`` terms in v.
 
     Returns
     -------
@@ -688,8 +719,11 @@ def fit_deformation(
         )
     if ridge is not None and ridge < 0:
         raise InputError(f"ridge must be >= 0, got {ridge}")
+    if flat_top and kind != "c0":
+        raise InputError(f"flat_top applies to kind='c0' (the C1 kinds are flat already), got {kind!r}")
     with _single_threaded_blas():
-        return _solve(r, p, _accumulate(r, p, m, n, kind), m, n, ridge)
+        data = _accumulate(r, p, m, n + 1 if flat_top else n, kind)
+        return _solve(r, p, data, m, n, ridge, flat_top)
 
 
 def select_terms(
@@ -698,6 +732,7 @@ def select_terms(
     kind: Kind = "c0",
     candidates: tuple[int, ...] = AUTO_TERMS,
     seed: int = 0,
+    flat_top: bool = False,
 ) -> int:
     """The term count ``M = N`` that predicts held-out points best (hold-out validation).
 
@@ -717,6 +752,8 @@ def select_terms(
         points per unknown are skipped.
     seed : int
         Of the random hold-out split (fixed: the same data give the same choice).
+    flat_top : bool
+        As in :func:`fit_deformation`.
 
     Returns
     -------
@@ -736,9 +773,9 @@ def select_terms(
     r_train, p_train = r[train], p[train]
     scores = []
     with _single_threaded_blas():
-        data = _accumulate(r_train, p_train, top, top, kind)
+        data = _accumulate(r_train, p_train, top, top + 1 if flat_top else top, kind)
         for k in usable:
-            fit = _solve(r_train, p_train, data, k, k, None)
+            fit = _solve(r_train, p_train, data, k, k, None, flat_top)
             miss = r[test] - fit.evaluate(p[test, 0], p[test, 1])
             scores.append(float(np.sqrt(np.einsum("ij,ij->", miss, miss) / len(test))))
     best = min(scores)

@@ -512,13 +512,15 @@ def fit_patch(
 
     residuals = pts - _cell_values(base, params[:, 0], params[:, 1])
     base_err = np.sqrt(np.einsum("ij,ij->i", residuals, residuals))
+    # A 3-sided patch's top side is one point (the apex): C0 terms get zero slope across it.
+    flat_top = len(sides) == 3 and kind == "c0"
     if tolerance is None:
         if m == "auto":
             # Scored on the points within the sides: those beyond keep their distance to
             # the boundary whatever the terms, and would hide the differences.
             inside = ~outside if (~outside).sum() >= 100 else np.ones(len(pts), dtype=bool)
-            m = n = select_terms(residuals[inside], params[inside], kind)
-        deformation = fit_deformation(residuals, params, int(m), int(n), kind)
+            m = n = select_terms(residuals[inside], params[inside], kind, flat_top=flat_top)
+        deformation = fit_deformation(residuals, params, int(m), int(n), kind, flat_top=flat_top)
     else:
         try:
             deformation = choose_mn(residuals, params, float(tolerance), kind, max_mn=max_terms)
@@ -533,7 +535,10 @@ def fit_patch(
             DeformedPatch(base, deformation), pts, initial=params
         )
         residuals = pts - _cell_values(base, params[:, 0], params[:, 1])
-        deformation = fit_deformation(residuals, params, deformation.m, deformation.n, kind)
+        deformation = fit_deformation(
+            residuals, params, deformation.m, deformation.n - int(flat_top), kind,
+            flat_top=flat_top,
+        )
     fit_errors = {
         "mean": deformation.mean_error,
         "max": deformation.max_error,
