@@ -567,7 +567,8 @@ def build_edges(
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
         params[key] = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
-    splines = _joint_fit(data, params, spans, corners, normals, pairs, smooth)
+    legs = _leg_bases(corners, normals, smooth, users, sheets)
+    splines = _joint_fit(data, params, spans, corners, legs, pairs)
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is
     # better taken from the whole cloud: project samples of each edge onto a local quadric
     # and refit them (noise-free samples afford more spans).
@@ -586,7 +587,7 @@ def build_edges(
         if key in creases:
             # A crease's samples belong on the intersection of the two segments' surfaces.
             samples[key] = sheets.intersect(raw, sorted(users[key]))
-    splines = _joint_fit(samples, sample_t, final, corners, normals, pairs, smooth)
+    splines = _joint_fit(samples, sample_t, final, corners, legs, pairs)
     curves, errors, rms = {}, {}, {}
     for key, spline in splines.items():
         t = _project(spline, data[key], params[key])
@@ -775,29 +776,86 @@ def _smooth_corners(
     return out
 
 
+def _plane_basis(normal: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(2, 3) orthonormal basis of the plane with this normal."""
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1)
+    return np.stack([t1, np.cross(normal, t1)])
+
+
+def _leg_bases(
+    corners: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    smooth: dict[int, bool],
+    users: dict[Key, list[int]],
+    sheets: _Sheets,
+) -> dict[tuple[int, Key], NDArray[np.float64]]:
+    """The directions each edge may leave each of its corners in, (k, 3) per (corner, edge).
+
+    At a smooth corner: the corner's tangent plane. At a crease corner each segment has its
+    own tangent plane there, and an edge lies in those of all its segments: one plane for an
+    edge inside a smooth pair of segments (or an open edge), the line where the two planes
+    meet for a crease edge. (Free 3-D legs let noise kink two crease edges through a corner
+    and fold the patch between them, e.g. a cap whose corners are straight angles.)"""
+    cos_max = np.cos(np.radians(CREASE_ANGLE))
+    at: dict[int, set[int]] = {}
+    for key, who in users.items():
+        for c in key:
+            at.setdefault(c, set()).update(who)
+    own: dict[tuple[int, int], NDArray[np.float64]] = {}
+    for c, labels in at.items():
+        if smooth.get(c, True):
+            continue
+        # Segments that continue smoothly into each other through the corner share one
+        # (averaged) plane, so the crease edges on either side of a smooth seam leave the
+        # corner along exactly one line, not two noisy ones.
+        found = {label: sheets.project(corners[c][None], label)[1][0] for label in sorted(labels)}
+        groups: list[list[int]] = []
+        for label, n in found.items():
+            for group in groups:
+                if abs(float(found[group[0]] @ n)) >= cos_max:
+                    group.append(label)
+                    break
+            else:
+                groups.append([label])
+        for group in groups:
+            ref = found[group[0]]
+            mean = np.sum([found[g] * np.sign(found[g] @ ref) for g in group], axis=0)
+            for label in group:
+                own[(c, label)] = mean / np.linalg.norm(mean)
+
+    def normal_of(c: int, label: int) -> NDArray[np.float64]:
+        return own[(c, label)]
+
+    out: dict[tuple[int, Key], NDArray[np.float64]] = {}
+    for key, who in users.items():
+        for c in key:
+            if smooth.get(c, True):
+                out[(c, key)] = _plane_basis(normals[c])
+                continue
+            planes = [normal_of(c, label) for label in who]
+            if len(planes) == 2 and abs(float(planes[0] @ planes[1])) < cos_max:
+                line = np.cross(planes[0], planes[1])
+                out[(c, key)] = (line / np.linalg.norm(line))[None]
+            else:
+                out[(c, key)] = _plane_basis(planes[0])
+    return out
+
+
 def _joint_fit(
     data: dict[Key, NDArray[np.float64]],
     params: dict[Key, NDArray[np.float64]],
     spans: dict[Key, int],
     corners: NDArray[np.float64],
-    normals: NDArray[np.float64],
+    legs: dict[tuple[int, Key], NDArray[np.float64]],
     pairs: dict[int, list[tuple[Key, Key]]],
-    smooth: dict[int, bool] | None = None,
 ) -> dict[Key, BSpline]:
-    """All edges at once: ends on the corners, end legs in the corner's tangent plane (free
-    in 3D at a corner that is not smooth), paired edges with equal and opposite end
-    derivatives (at regular corners)."""
-    # Tangent-plane basis per corner (all of space where the surface has no tangent plane).
-    basis = {}
-    for c, n in enumerate(normals):
-        if smooth is not None and not smooth.get(c, True):
-            basis[c] = np.eye(3)
-            continue
-        helper = np.eye(3)[int(np.argmin(np.abs(n)))]
-        t1 = np.cross(n, helper)
-        t1 /= np.linalg.norm(t1)
-        basis[c] = np.stack([t1, np.cross(n, t1)])
-    # Leg unknowns: one 2-vector per (corner, edge end), shared (with a sign) by a pair.
+    """All edges at once: ends on the corners, end legs along ``legs`` (the corner's tangent
+    plane, or a crease line), paired edges with equal and opposite end derivatives (at
+    regular corners)."""
+    basis = dict(legs)
+    # Leg unknowns: one k-vector per (corner, edge end), shared (with a sign) by a pair.
     leg_var: dict[tuple[int, Key], tuple[int, float]] = {}
     n_var = 0
     for c, plist in pairs.items():
@@ -805,15 +863,16 @@ def _joint_fit(
         if len(seen) != len(set(seen)):
             continue  # irregular corner: no pairing
         for ea, eb in plist:
+            basis[(c, eb)] = basis[(c, ea)]  # one shared leg, so one set of directions
             leg_var[(c, ea)] = (n_var, 1.0)
             leg_var[(c, eb)] = (n_var, -1.0)
-            n_var += len(basis[c])
+            n_var += len(basis[(c, ea)])
     offsets: dict[Key, int] = {}
     for key in data:
         for c in key:
             if (c, key) not in leg_var:
                 leg_var[(c, key)] = (n_var, 1.0)
-                n_var += len(basis[c])
+                n_var += len(basis[(c, key)])
     for key in data:
         offsets[key] = n_var
         n_var += 3 * (spans[key] - 1)
@@ -835,10 +894,10 @@ def _joint_fit(
                 var, sign = leg_var[(c, key)]
                 scale = sign / (3.0 * s)
                 for d in range(3):
-                    for j in range(len(basis[c])):
+                    for j in range(len(basis[(c, key)])):
                         rows.append(row0 + d * k + np.arange(k))
                         cols.append(np.full(k, var + j))
-                        vals.append(b[:, col] * scale * basis[c][j, d])
+                        vals.append(b[:, col] * scale * basis[(c, key)][j, d])
             for i in range(s - 1):
                 for d in range(3):
                     rows.append(row0 + d * k + np.arange(k))
@@ -859,7 +918,8 @@ def _joint_fit(
             ctrl[0], ctrl[-1] = p0, p1
             for col, c, p in ((1, key[0], p0), (s + 1, key[1], p1)):
                 var, sign = leg_var[(c, key)]
-                ctrl[col] = p + sign / (3.0 * s) * (z[var : var + len(basis[c])] @ basis[c])
+                leg = basis[(c, key)]
+                ctrl[col] = p + sign / (3.0 * s) * (z[var : var + len(leg)] @ leg)
             if s > 1:
                 ctrl[2 : s + 1] = z[offsets[key] : offsets[key] + 3 * (s - 1)].reshape(-1, 3)
             splines[key] = BSpline(_knots(s), ctrl, 3)
