@@ -180,6 +180,25 @@ def test_noisy_c1_no_hooks_at_corners(tmp_path: Path, shape: str, max_angle: flo
     assert _true_errors(rec, cloud).mean() <= 1e-3  # noise sigma is 4e-3 of the diagonal
 
 
+def test_can_creases_and_volume(tmp_path: Path) -> None:
+    """A closed cylinder: the rims are 90-degree creases (edges on the intersection of wall and
+    cap, leaving their corners along the crease line), the caps 4-sided with straight-angle
+    corners; one valid solid with the right volume."""
+    cloud = samples.can(20000)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert rec.sew_info.is_solid and rec.sew_info.valid
+    assert abs(volume(rec.shape) / cloud.volume - 1.0) <= 1e-4
+    m = measure(read_step(rec.write_step(tmp_path / "can.step")), samples=40)
+    assert m["closed"] and m["free_edges"] == 0 and m["shared_edges"] == 12
+    assert m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert 89.0 <= m["max_angle_deg"] <= 92.0  # the rim creases, nothing folds
+    t = np.linspace(0.0, 1.0, 50)
+    for key, who in rec.network.users.items():
+        if 4 in who or 5 in who:  # rim edges lie on the true rim circles
+            assert cloud.distance(rec.edges[key].evaluate(t)).max() <= 1e-4 * cloud.diagonal
+    assert _true_errors(rec, cloud).mean() <= 2e-5
+
+
 def test_pot_c1_keeps_c0_at_degenerate_corners() -> None:
     """The pot's flat bottom meets the wall seams at corners where its two sides are tangent
     and the bottom-wall edge is a crease; patches whose C1 fit goes wrong keep their C0 fit,

@@ -11,6 +11,7 @@ Shapes (every segment is 4-sided, except the teapot's collapsed lid and bottom p
 * :func:`sphere6` -- unit sphere as six patches (cube-sphere), corners where three meet.
 * :func:`torus` -- ring torus as a 4 x 4 grid of patches, every corner joins four.
 * :func:`cylinder` -- open tube, 4 patches around x 2 along the axis.
+* :func:`can` -- closed cylinder: 4 wall patches and two round caps (90-degree crease rims).
 * :func:`pot` -- a bulging surface of revolution, 4 x 2 patches, closed by a flat bottom.
 * :func:`sheet` -- a curved open sheet split 2 x 2.
 * :func:`teapot` -- Newell's Utah teapot, one label per bicubic Bezier patch (by default rim,
@@ -169,6 +170,45 @@ def cylinder(
         return np.abs(np.hypot(q[:, 0], q[:, 1]) - radius)
 
     return _finish("cylinder", pts, iu * split[1] + iz, distance, noise, rng, False)
+
+
+def can(
+    n_points: int = 20000, noise: float = 0.0, seed: int = 0, radius: float = 1.0,
+    height: float = 2.0,
+) -> LabelledCloud:
+    """Closed cylinder (a can): 4 wall patches and two flat round caps, one patch each.
+
+    The rims are 90-degree creases; each cap's four corners (where the wall seams reach it)
+    are straight angles, so the caps are 4-sided patches with degenerate corners.
+    """
+    _check(n_points, noise)
+    rng = np.random.default_rng(seed)
+    wall_area, cap_area = 2 * np.pi * radius * height, np.pi * radius**2
+    n_wall = int(round(n_points * wall_area / (wall_area + 2 * cap_area)))
+    n_cap = (int(n_points) - n_wall) // 2
+    u = rng.random(n_wall) * 2 * np.pi
+    z = rng.random(n_wall) * height
+    wall = np.column_stack([radius * np.cos(u), radius * np.sin(u), z])
+    labels = [np.floor(u / (np.pi / 2)).astype(np.int64) % 4]
+    parts = [wall]
+    for k, level in enumerate((0.0, height)):
+        r = radius * np.sqrt(rng.random(n_cap))
+        phi = rng.random(n_cap) * 2 * np.pi
+        parts.append(np.column_stack([r * np.cos(phi), r * np.sin(phi), np.full(n_cap, level)]))
+        labels.append(np.full(n_cap, 4 + k, dtype=np.int64))
+
+    def distance(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        q = np.asarray(q, float)
+        rq, zq = np.hypot(q[:, 0], q[:, 1]), q[:, 2]
+        above = np.maximum(np.maximum(-zq, zq - height), 0.0)
+        d_wall = np.hypot(rq - radius, above)
+        d_caps = [np.hypot(np.maximum(rq - radius, 0.0), zq - level) for level in (0.0, height)]
+        return np.minimum(d_wall, np.minimum(*d_caps))
+
+    return _finish(
+        "can", np.vstack(parts), np.concatenate(labels), distance, noise, rng, True,
+        np.pi * radius**2 * height,
+    )
 
 
 def _pot_profile(z: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -575,9 +615,10 @@ SHAPES: dict[str, Callable[..., LabelledCloud]] = {
     "sphere6": sphere6,
     "torus": torus,
     "cylinder": cylinder,
+    "can": can,
     "pot": pot,
     "sheet": sheet,
     "teapot": teapot,
 }
 
-__all__ = ["SHAPES", "LabelledCloud", "cylinder", "pot", "sheet", "sphere6", "teapot", "torus"]
+__all__ = ["SHAPES", "LabelledCloud", "can", "cylinder", "pot", "sheet", "sphere6", "teapot", "torus"]
