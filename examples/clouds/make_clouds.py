@@ -20,6 +20,7 @@ CLOUDS = {
     "torus": lambda: samples.torus(20000),
     "sphere6": lambda: samples.sphere6(20000),
     "cylinder": lambda: samples.cylinder(20000),
+    "can": lambda: samples.can(20000),
     "pot": lambda: samples.pot(20000),
     "torus_noisy": lambda: samples.torus(20000, noise=0.003),
 }
