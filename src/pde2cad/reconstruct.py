@@ -41,6 +41,9 @@ SEW_TOLERANCE = 1e-6
 #: With C1, a patch keeps its C0 fit when the C1 fit's mean error is above this multiple of
 #: the C0 one (the bicubic base went wrong, e.g. at degenerate corners).
 C1_ERROR_RATIO = 2.0
+#: ... unless the C1 fit's mean error is below this fraction of the diagonal anyway: tangent
+#: continuity is worth a few 1e-5 (an ellipsoid's flat faces: C1 2.6x C0 but 3.9e-5).
+C1_ERROR_FLOOR = 5e-5
 #: Progress callback: ``progress(stage, done, total)``.
 Progress = Callable[[str, int, int], None]
 
@@ -84,7 +87,8 @@ class Reconstruction:
         Corners, side loops, edge curves and their fit errors.
     c0_fallback : list of int
         With ``continuity="c1"``: segments fitted C0 instead (3-sided, or whose C1 fit was
-        more than ``C1_ERROR_RATIO`` times worse); their edges are only positionally joined.
+        more than ``C1_ERROR_RATIO`` times worse and above ``C1_ERROR_FLOOR`` of the
+        diagonal); their edges are only positionally joined.
     """
 
     shape: Any
@@ -215,8 +219,8 @@ def reconstruct(
             # creases (measured on the pot: 4 of its 9 patches): keep the C0 fit then, and
             # say so in c0_fallback.
             # fit_errors: the fit's own mean (Patch.errors would project every point again).
-            if c1 is not None and (
-                c1.fit_errors["mean"] <= C1_ERROR_RATIO * c0.fit_errors["mean"]
+            if c1 is not None and c1.fit_errors["mean"] <= max(
+                C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR * diagonal
             ):
                 patches[label] = c1
             else:
