@@ -589,3 +589,8 @@ def test_summary_names_c0_fallback_patches_and_unmatched_corners() -> None:
         summary.pop(key)
     text = "\n".join(summary_lines({"summary": summary}))
     assert "max normal angle 0.4 deg" in text and "kept C0" not in text and "away" not in text
+    # Sparse patches get a note naming the sparsest (folds near corners start there).
+    patches = [{"label": 0, "points": 5000}, {"label": 4, "points": 449}, {"label": 5, "points": 900}]
+    text = "\n".join(summary_lines({"summary": summary, "patches": patches}))
+    assert "2 of 3 patches have fewer than 1000 points (segment 4: 449)" in text
+    assert "fewer than" not in "\n".join(summary_lines({"summary": summary, "patches": patches[:1]}))

@@ -349,6 +349,11 @@ def _corner_summary(
     }
 
 
+#: Patches with fewer points than this get a note in the summary (measured: 500-800 points
+#: per patch can fold faces near three-patch corners; from ~1000 the samples were reliable).
+SPARSE_PATCH = 1000
+
+
 def summary_lines(report: Mapping[str, Any]) -> list[str]:
     """A few human-readable lines of a :func:`build_report` dict."""
     s = report["summary"]
@@ -390,6 +395,16 @@ def summary_lines(report: Mapping[str, Any]) -> list[str]:
         lines.append(
             f"C1: {word} {', '.join(map(str, fallback))} kept C0 (3-sided or their C1 fit "
             "was worse)"
+        )
+    patches = report.get("patches") or []
+    sparse = [p for p in patches if p.get("points", SPARSE_PATCH) < SPARSE_PATCH]
+    if sparse:
+        fewest = min(sparse, key=lambda p: p["points"])
+        lines.append(
+            f"note: {len(sparse)} of {len(patches)} patches have fewer than "
+            f"{SPARSE_PATCH} points (segment {fewest['label']}: {fewest['points']}); below "
+            "that, edges and corners get noisy and faces may fold near corners — scan denser "
+            "or merge segments"
         )
     if not s["faces_matched"]:
         lines.append(
