@@ -15,6 +15,7 @@ Pipeline:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,8 +40,10 @@ CAD_TOLERANCE = 1e-4
 #: Sewing tolerance relative to the diagonal (shared edges are identical curves).
 SEW_TOLERANCE = 1e-6
 #: With C1, a patch keeps its C0 fit when the C1 fit's mean error is above this multiple of
-#: the C0 one (the bicubic base went wrong, e.g. at degenerate corners).
-C1_ERROR_RATIO = 2.0
+#: the C0 one (the bicubic base went wrong, e.g. at degenerate corners). Not 2: the flat
+#: faces of a sparse ellipsoid (5k points) fit C1 at 2.4-2.65x C0 and their C0 seams read 6.7
+#: deg instead of 0.87.
+C1_ERROR_RATIO = 3.0
 #: ... unless the C1 fit's mean error is below this fraction of the diagonal anyway: tangent
 #: continuity is worth a few 1e-5 (an ellipsoid's flat faces: C1 2.6x C0 but 3.9e-5).
 C1_ERROR_FLOOR = 5e-5
@@ -86,9 +89,11 @@ class Reconstruction:
     network : EdgeNetwork
         Corners, side loops, edge curves and their fit errors.
     c0_fallback : list of int
-        With ``continuity="c1"``: segments fitted C0 instead (3-sided, or whose C1 fit was
-        more than ``C1_ERROR_RATIO`` times worse and above ``C1_ERROR_FLOOR`` of the
-        diagonal); their edges are only positionally joined.
+        With ``continuity="c1"``: segments fitted C0 instead (too sparse for ribbons, or
+        whose C1 fit was more than ``C1_ERROR_RATIO`` times worse and above
+        ``C1_ERROR_FLOOR`` of the diagonal); their edges are only positionally joined.
+        3-sided segments are fitted C1 like 4-sided ones (bicubic base with a collapsed top,
+        see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
     """
 
     shape: Any
@@ -111,6 +116,35 @@ class Reconstruction:
         from pde2cad.occ import write_step
 
         return write_step(self.shape, path, units=units)
+
+
+def apex_first(network: EdgeNetwork) -> EdgeNetwork:
+    """The network with every 3-sided loop rotated so its apex (``loop[2]``, where the
+    collapsed top side of Fig. 5.11 sits) is the corner best suited to it.
+
+    A C1 apex needs every patch at that corner to have its apex there (their ribbons all
+    vanish at it, see :func:`~pde2cad.layout.ribbons.shared_ribbons`): the corner chosen is
+    the one with the most 3-sided users, then the fewest other users (the pole where
+    triangles meet), ties kept as the loop has them. Only the loops' starting corners
+    change (a new :class:`EdgeNetwork`; curves and edges are the same objects).
+    """
+    users: dict[int, list[int]] = {}
+    for label, ids in network.loops.items():
+        for c in ids:
+            users.setdefault(c, []).append(len(ids))
+    loops = {}
+    for label, ids in network.loops.items():
+        if len(ids) != 3:
+            loops[label] = ids
+            continue
+        score = [(users[c].count(3), -(len(users[c]) - users[c].count(3))) for c in ids]
+        best = ids[2]
+        for k in (2, 0, 1):
+            if score[k] > score[ids.index(best)]:
+                best = ids[k]
+        r = (ids.index(best) - 2) % 3
+        loops[label] = ids[r:] + ids[:r]
+    return dataclasses.replace(network, loops=loops)
 
 
 def reconstruct(
@@ -182,6 +216,9 @@ def reconstruct(
     t0 = time.perf_counter()
     _report(progress, "edges", 0, 1)
     network = build_edges(pts, lab, layout, tree)
+    if continuity == "c1":
+        # 3-sided patches: put their apex where a C1 pole can form (e.g. triangles around it).
+        network = apex_first(network)
     timings["edges"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -114,3 +114,71 @@ def test_regular_network_shares_exact_opposite_ribbons() -> None:
         # The Coons signs of the two sides' ribbons differ by the side orientation; the
         # inward ones are opposite, so the Coons ones are equal or opposite.
         assert min(np.abs(ra - rb).max(), np.abs(ra + rb).max()) < 1e-9 * np.abs(ra).max()
+
+
+def _side_params(ids: list[int], key: tuple[int, int], t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(u, v) on a patch's side ``key`` at edge parameters ``t`` (3- or 4-sided loop)."""
+    n = len(ids)
+    k = [key_of(ids[j], ids[(j + 1) % n]) for j in range(n)].index(key)
+    s = t if ids[k] == key[0] else 1.0 - t
+    one, zero = np.ones_like(s), np.zeros_like(s)
+    if k == 0:
+        return np.column_stack([s, zero])
+    if k == 1:
+        return np.column_stack([one, s])
+    if k == 2 and n == 4:
+        return np.column_stack([1.0 - s, one])
+    return np.column_stack([zero, 1.0 - s])
+
+
+def test_triangles_around_a_pole_are_c1() -> None:
+    """A sheet split by its diagonals into 4 triangles meeting at the centre: with the apex
+    of every triangle at the centre, the shared ribbons make every edge C1, up to and
+    including the pole (one tangent plane there), and the C1 fit is no worse than C0."""
+    from pde2cad.reconstruct import apex_first
+
+    cloud = samples.sheet(20000)
+    pts = cloud.points
+    xy = pts[:, :2] - 1.0
+    lab = np.where(
+        np.abs(xy[:, 0]) > np.abs(xy[:, 1]),
+        np.where(xy[:, 0] > 0, 0, 1),
+        np.where(xy[:, 1] > 0, 2, 3),
+    )
+    network = build_edges(pts, lab, build_layout(pts, lab, check=False), cKDTree(pts))
+    network = apex_first(network)
+    apexes = {ids[2] for ids in network.loops.values()}
+    assert all(len(ids) == 3 for ids in network.loops.values()) and len(apexes) == 1
+    c0 = {
+        label: fit_patch(pts[lab == label], continuity="c0", m=6, n=6, boundary=network.sides(label))
+        for label in sorted(network.loops)
+    }
+    ribbons = shared_ribbons(network, c0)
+    assert set(ribbons) == set(network.loops)
+    c1 = {
+        label: fit_patch(
+            c0[label].points, continuity="c1", m=6, n=6, boundary=c0[label].sides,
+            ribbons=ribbons[label], params=c0[label].params, outside=c0[label].outside,
+        )
+        for label in sorted(network.loops)
+    }
+    for label, patch in c1.items():
+        for residual in patch.base.compatibility_residuals().values():
+            assert max(residual.values()) < 1e-9
+        assert patch.fit_errors["mean"] < 1.5 * c0[label].fit_errors["mean"] + 1e-6
+    t = np.linspace(0.0, 1.0, 41)
+    worst = 0.0
+    for key, who in network.users.items():
+        if len(who) != 2:
+            continue
+        pa = _side_params(network.loops[who[0]], key, t)
+        pb = _side_params(network.loops[who[1]], key, t)
+        na = c1[who[0]].normals(pa[:, 0], pa[:, 1])
+        nb = c1[who[1]].normals(pb[:, 0], pb[:, 1])
+        cos = np.abs(np.einsum("ij,ij->i", na, nb))
+        worst = max(worst, float(np.degrees(np.arccos(np.clip(cos.min(), -1.0, 1.0)))))
+    assert worst < 0.05
+    # One tangent plane at the pole: the limit normals of all four patches there agree.
+    u = np.linspace(0.0, 1.0, 9)
+    normals = np.vstack([p.normals(u, np.full_like(u, 1.0 - 1e-6)) for p in c1.values()])
+    assert np.degrees(np.arccos(np.clip(np.abs(normals @ normals[0]).min(), -1, 1))) < 0.05

@@ -422,3 +422,36 @@ def test_evaluate_of_many_points_equals_the_boolean_sum(kind: str) -> None:
     grid = patch.evaluate(u[:, None], v[None, :50])  # a grid keeps the Boolean sum
     column = patch._partials(u, np.full(u.size, v[7]), ((0, 0),))[0]
     np.testing.assert_allclose(grid[:, 7], column, rtol=0, atol=1e-11)
+
+
+def test_apex_ribbon_three_sided_bicubic_is_compatible_with_one_tangent_plane() -> None:
+    """3-sided bicubic Coons (Fig. 5.11, Eqs. 5.2-5.7): top = apex, d_top = apex_ribbon;
+    left/right ribbons vanish at the apex with slopes = the apex twists. The corner data are
+    compatible and the limit normal at the apex is the same from every direction."""
+    from pde2cad.surfaces.boundary import PiecewiseBezier
+    from pde2cad.surfaces.coons import BicubicCoons, apex_ribbon
+
+    apex = np.array([0.0, 0.0, 0.0])
+    p0, p1 = np.array([1.0, 0.0, 0.1]), np.array([0.0, 1.0, 0.1])
+    bottom = PiecewiseBezier(np.array([[p0, [1.0, 0.5, 0.1], [0.5, 1.0, 0.1], p1]]), np.array([0.0, 1.0]))
+    right = PiecewiseBezier(np.array([[p1, [0.0, 0.6, 0.02], [0.0, 0.3, 0.0], apex]]), np.array([0.0, 1.0]))
+    left = PiecewiseBezier(np.array([[p0, [0.6, 0.0, 0.02], [0.3, 0.0, 0.0], apex]]), np.array([0.0, 1.0]))
+    top = PiecewiseBezier.from_point(apex)
+    e = np.array([0.0, 1.0])
+    lv, rv = left.derivative(e)[1], right.derivative(e)[1]
+    tau0, tau1 = np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    d_top = apex_ribbon(left, right, tau0, tau1, normal=np.array([0.0, 0.0, 1.0]))
+    assert np.allclose(d_top.evaluate(e), [lv, rv])
+    assert np.allclose(d_top.derivative(e), [tau0, tau1])
+    zero = np.zeros(3)
+    d_left = PiecewiseBezier.from_hermite([bottom.derivative(e)[0], zero], [zero, tau0], e)
+    d_right = PiecewiseBezier.from_hermite([bottom.derivative(e)[1], zero], [zero, tau1], e)
+    d_bottom = PiecewiseBezier.from_hermite([left.derivative(e)[0], right.derivative(e)[0]], [zero, zero], e)
+    patch = BicubicCoons(bottom, right, top, left, d_bottom, d_right, d_top, d_left)
+    for residual in patch.compatibility_residuals().values():
+        assert max(residual.values()) < 1e-12
+    u = np.linspace(0.0, 1.0, 7)
+    su, sv = patch.derivatives(u, np.full_like(u, 1.0 - 1e-6))
+    nrm = np.cross(su, sv)
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    assert np.allclose(np.abs(nrm[:, 2]), 1.0, atol=1e-5)

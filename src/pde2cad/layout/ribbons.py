@@ -49,6 +49,7 @@ from pde2cad.surfaces.coons import (
     BicubicCoons,
     BilinearCoons,
     Ribbons,
+    apex_ribbon,
     estimate_cross_derivatives,
 )
 from pde2cad.surfaces.patch import Patch
@@ -79,6 +80,12 @@ G1_WEIGHT = 1.0
 FIT_REGULAR = False
 #: Re-projections of the points onto the fitted bases (each followed by a refit).
 ROUNDS = 1
+#: 3-sided patches: apex twists of a uniform sweep of the tangent directions (see
+#: :func:`_sweep_twists`) instead of the estimate's (which carries the bilinear patch's
+#: uneven parameterization near the apex, twice as fast measured on the teapot bottom).
+APEX_SWEEP = True
+#: (band, pieces) retried, in order, when a 3-sided patch's estimate is rank-deficient.
+APEX_RETRIES = ((0.3, PIECES), (BAND, 2), (BAND, 1))
 
 
 def _nodes(curve: PiecewiseBezier, reverse: bool, sign: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -90,8 +97,15 @@ def _nodes(curve: PiecewiseBezier, reverse: bool, sign: float) -> tuple[NDArray[
     return sign * curve.evaluate(s), sign * curve.derivative(s)
 
 
-def _inward(rib: Ribbons) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """The four ribbons as inward derivatives along each side's loop direction (nodes)."""
+def _inward(rib: Ribbons, n_sides: int = 4) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """The ribbons of the real sides as inward derivatives along each side's loop direction
+    (nodes): four, or three for a 3-sided patch (bottom, right, left; the top is the apex)."""
+    if n_sides == 3:
+        return [
+            _nodes(rib.d_bottom, False, 1.0),
+            _nodes(rib.d_right, False, -1.0),
+            _nodes(rib.d_left, True, 1.0),
+        ]
     return [
         _nodes(rib.d_bottom, False, 1.0),
         _nodes(rib.d_right, False, -1.0),
@@ -100,11 +114,47 @@ def _inward(rib: Ribbons) -> list[tuple[NDArray[np.float64], NDArray[np.float64]
     ]
 
 
+def _sweep_twists(
+    left: PiecewiseBezier,
+    right: PiecewiseBezier,
+    normal: NDArray[np.float64],
+    estimate: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Apex twists ``S_uv(0, 1), S_uv(1, 1)`` of a 3-sided patch for which
+    ``d_top(u) = S_v(u, 1)`` turns uniformly from ``L = left'(1)`` to ``R = right'(1)`` in the
+    tangent plane (normal ``normal``) with linearly varying length: with ``theta`` the angle
+    between them, ``e_L, e_R`` their directions and ``p_L, p_R`` the in-plane unit normals
+    to them in the sense of the turn,
+    ``S_uv(0, 1) = (|R| - |L|) e_L + theta |L| p_L`` and
+    ``S_uv(1, 1) = (|R| - |L|) e_R + theta |R| p_R``
+    (the derivatives of ``r(u) (cos theta u, sin theta u)``, a uniform polar parameterization
+    of the pole). ``estimate`` (2, D), the fitted twists, only decides the sense of the turn
+    when ``L`` and ``R`` are (anti)parallel."""
+    end = np.array([1.0])
+    lv, rv = left.derivative(end)[0], right.derivative(end)[0]
+    nrm = normal / max(float(np.linalg.norm(normal)), 1e-300)
+    ll, lr = max(float(np.linalg.norm(lv)), 1e-300), max(float(np.linalg.norm(rv)), 1e-300)
+    el, er = lv / ll, rv / lr
+    theta = float(np.arccos(np.clip(el @ er, -1.0, 1.0)))
+    pl, pr = np.cross(nrm, el), np.cross(nrm, er)
+    pl /= max(float(np.linalg.norm(pl)), 1e-300)
+    pr /= max(float(np.linalg.norm(pr)), 1e-300)
+    # Sense: towards R at the L end (and away from L at the R end).
+    sense = float(pl @ er - pr @ el)
+    if abs(sense) < 1e-6:
+        sense = float(pl @ estimate[0] + pr @ estimate[1])
+    sign = 1.0 if sense >= 0.0 else -1.0
+    return (lr - ll) * el + sign * theta * ll * pl, (lr - ll) * er + sign * theta * lr * pr
+
+
 def _corner_signs(
-    corner: int, network: EdgeNetwork, four_sided: set[int]
+    corner: int, network: EdgeNetwork, four_sided: set[int], apex: dict[int, int] | None = None
 ) -> dict[int, float] | None:
     """Alternating sign per patch around ``corner`` (flipping across shared edges), or None
-    when an odd cycle makes it impossible."""
+    when an odd cycle makes it impossible. Patches whose apex is ``corner`` (3-sided) take
+    no part: their twists there are the apex ones (see :func:`shared_ribbons`)."""
+    apex = apex or {}
+    four_sided = {label for label in four_sided if apex.get(label) != corner}
     at = [label for label in four_sided if corner in network.loops[label]]
     if not at:
         return {}
@@ -141,33 +191,62 @@ def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[i
     Returns
     -------
     dict[int, Ribbons]
-        For each 4-sided segment whose points determine its own ribbons (3-sided ones, and
-        sparse ones, are left to a C0 fit).
+        For each 3- or 4-sided segment whose points determine its own ribbons (sparse ones
+        are left to a C0 fit).
+
+    Notes
+    -----
+    A 3-sided segment (loop ``[a, b, apex]``, Fig. 5.11) shares the ribbons of its three real
+    sides exactly as a 4-sided one. At its apex the left and right ribbons vanish (the top
+    side is a point) and their slopes there are the apex twists, which are also the end
+    slopes of ``d_top`` (:func:`~pde2cad.surfaces.coons.apex_ribbon`). Across an edge ending
+    at the apex of both its users, C1 asks the two inward ribbons' slopes at the apex to be
+    opposite: one vector per edge (the average of the two estimates, projected into the
+    corner's tangent plane ``network.normals``), so every ``d_top`` around a pole lies in
+    one plane and the pole has one tangent plane. An edge ending at the apex of only one of
+    its users cannot be C1 near that end; it keeps each side's own ribbon.
     """
-    four = {label for label, ids in network.loops.items() if len(ids) == 4}
+    four = {label for label, ids in network.loops.items() if len(ids) in (3, 4)}
+    apex = {label: ids[2] for label, ids in network.loops.items() if len(ids) == 3}
     # 1. Each patch's own estimate, as inward node data per loop side.
     own: dict[int, list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = {}
     for label in sorted(four):
         patch = c0_patches[label]
         bilinear = patch.base
         pts, params, outside = patch.points, patch.params, patch.outside
-        try:
-            rib = estimate_cross_derivatives(
-                pts[~outside], params[~outside], bilinear.bottom, bilinear.right, bilinear.top,
-                bilinear.left, band=BAND, pieces=PIECES,
-            )
-        except FitError:
+        # A 3-sided patch's apex band is small in space and can leave the top ribbon's
+        # pieces undetermined (its d_top is replaced by apex_ribbon anyway): retry wider,
+        # then coarser.
+        tries = ((BAND, PIECES),) if label not in apex else ((BAND, PIECES), *APEX_RETRIES)
+        rib = None
+        for band, pieces in tries:
+            try:
+                rib = estimate_cross_derivatives(
+                    pts[~outside], params[~outside], bilinear.bottom, bilinear.right,
+                    bilinear.top, bilinear.left, band=band, pieces=pieces,
+                )
+                break
+            except FitError:
+                continue
+        if rib is None:
             # Too few points along a side to estimate its ribbon (sparse clouds): this patch
             # stays C0 (the caller lists it), its neighbours use their own ribbons there.
             continue
-        own[label] = _inward(rib)
+        own[label] = _inward(rib, len(network.loops[label]))
+        if label in apex and APEX_SWEEP:
+            normal = network.normals[apex[label]]
+            tau0, tau1 = _sweep_twists(bilinear.left, bilinear.right, normal, rib.twists[:, 1])
+            # Inward slopes at the apex (loop sides 1 = right, ends there; 2 = left, starts
+            # there) are -S_uv(1, 1) and -S_uv(0, 1).
+            own[label][1][1][-1] = -tau1
+            own[label][2][1][0] = -tau0
     four = set(own)
 
     # 2. Twists: one vector per corner where the patch signs alternate (regular corners);
     # elsewhere (odd valence) no compatible value exists, so one per patch corner.
     eps: dict[int, dict[int, float]] = {}
     for corner in range(len(network.corners)):
-        signs = _corner_signs(corner, network, four)
+        signs = _corner_signs(corner, network, four, apex)
         regular = signs is not None and network.regular.get(corner, False)
         eps[corner] = signs if regular and signs is not None else {}
     omega = {corner: _omega(network, own, corner, signs) for corner, signs in eps.items() if signs}
@@ -176,26 +255,42 @@ def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[i
     # the unknowns (see _Terms); then one least-squares fit of all bases to their points.
     unknowns = _Unknowns()
     sides: dict[tuple[int, Key], _Terms] = {}
+    # Inward slope (edge parameter) at the apex end of edges ending at both users' apex.
+    apex_slope: dict[tuple[int, Key], NDArray[np.float64]] = {}
     for key, who in network.users.items():
         users = [u for u in who if u in four]
         if len(users) != 2 or len(who) != 2:
             continue
+        at_apex = [[apex.get(u) == c for u in users] for c in key]
+        if any(a != b for a, b in at_apex):
+            continue  # the apex of one user only: no C1 possible there, keep own ribbons
         (va, sa), (vb, sb) = (_in_t(network, own[u], u, key) for u in users)
         if _crease(network.curves[key], va, -vb):
             continue  # a real crease: each side keeps its own ribbon (C0 there)
-        if all(eps[c] for c in key):
+        if all(eps[c] or at_apex[j][0] for j, c in enumerate(key)):
             sides.update(_paired_edge(key, users, (va, sa), (vb, sb), unknowns))
         else:
             sides.update(_split_edge(network.curves[key], key, users, (va, sa), (vb, sb), unknowns))
+        for j, c in enumerate(key):
+            if at_apex[j][0]:
+                node = 0 if j == 0 else NODES - 1
+                normal = network.normals[c] / max(float(np.linalg.norm(network.normals[c])), 1e-300)
+                w = 0.5 * (sa[node] - sb[node])
+                w = w - (w @ normal) * normal
+                apex_slope[(users[0], key)], apex_slope[(users[1], key)] = w, -w
     data = {
-        label: _patch_terms(label, network, own[label], sides, eps, omega, unknowns)
+        label: _patch_terms(label, network, own[label], sides, eps, omega, unknowns, apex, apex_slope)
         for label in sorted(four)
     }
     solution = _fit(network, c0_patches, data, unknowns)
     out: dict[int, Ribbons] = {}
     for label in sorted(four):
         nodes = data[label][0].evaluate(solution)
-        out[label] = _to_ribbons([(nodes[k, 0], nodes[k, 1]) for k in range(4)])
+        n_sides = len(network.loops[label])
+        bil = c0_patches[label].base
+        out[label] = _to_ribbons(
+            [(nodes[k, 0], nodes[k, 1]) for k in range(n_sides)], bil.left, bil.right
+        )
     return out
 
 
@@ -254,8 +349,8 @@ def _in_t(
 def _side_of(network: EdgeNetwork, label: int, key: Key) -> tuple[int, bool]:
     """Loop side of ``label`` on edge ``key`` and whether it runs with the edge parameter."""
     ids = network.loops[label]
-    for k in range(4):
-        if key_of(ids[k], ids[(k + 1) % 4]) == key:
+    for k in range(len(ids)):
+        if key_of(ids[k], ids[(k + 1) % len(ids)]) == key:
             return k, ids[k] == key[0]
     raise KeyError(key)
 
@@ -272,7 +367,7 @@ def _omega(
     for label, e in signs.items():
         ids = network.loops[label]
         i = ids.index(corner)
-        for k in (i - 1 if i > 0 else 3, i):  # the sides ending and starting at the corner
+        for k in ((i - 1) % len(ids), i):  # the sides ending and starting at the corner
             _, slope = own[label][k]
             samples.append(e * (slope[0] if ids[k] == corner else -slope[-1]))
     return np.mean(samples, axis=0)
@@ -362,17 +457,23 @@ def _patch_terms(
     eps: dict[int, dict[int, float]],
     omega: dict[int, NDArray[np.float64]],
     unknowns: _Unknowns,
+    apex: dict[int, int] | None = None,
+    apex_slope: dict[tuple[int, Key], NDArray[np.float64]] | None = None,
 ) -> tuple[_Terms, _Terms]:
-    """A patch's inward node data (4, 2, NODES) as affine terms, and the end-slope
-    targets (4, 2, 2): per side, ``[k, 0]`` the entry's own expression, ``[k, 1]`` its target
-    (unused entries zero)."""
+    """A patch's inward node data (S, 2, NODES) as affine terms, and the end-slope
+    targets (S, 2, 2): per side, ``[k, 0]`` the entry's own expression, ``[k, 1]`` its target
+    (unused entries zero). ``S`` = 3 or 4 sides; at the apex of a 3-sided patch the end
+    slope is the shared ``apex_slope`` of the edge (edge parameter), else its own."""
     ids = network.loops[label]
+    n_sides = len(ids)
+    apex_corner = (apex or {}).get(label)
+    apex_slope = apex_slope or {}
     nodes = NODES
-    data = _Terms((4, 2, nodes))
-    targets = _Terms((4, 2, 2))
+    data = _Terms((n_sides, 2, nodes))
+    targets = _Terms((n_sides, 2, 2))
     inner = range(1, nodes - 1)
-    for k in range(4):
-        a, b = ids[k], ids[(k + 1) % 4]
+    for k in range(n_sides):
+        a, b = ids[k], ids[(k + 1) % n_sides]
         key = key_of(a, b)
         val_own, slope_own = own[k]
         data.fixed[k, 0, 0], data.fixed[k, 0, -1] = val_own[0], val_own[-1]
@@ -407,6 +508,17 @@ def _patch_terms(
         ends = ((0, a, 1.0, slope_own[0]), (1, b, -1.0, -slope_own[-1]))
         for end, corner, sgn_end, guess in ends:
             i = 0 if end == 0 else nodes - 1
+            if corner == apex_corner:
+                # The apex: value 0 (pinned above), slope shared across the edge.
+                w = apex_slope.get((label, key))
+                if w is None:  # unshared: the own slope, in the corner's tangent plane
+                    normal = network.normals[corner]
+                    normal = normal / max(float(np.linalg.norm(normal)), 1e-300)
+                    w = slope_own[i] - (slope_own[i] @ normal) * normal
+                    data.fixed[k, 1, i] = w
+                else:
+                    data.fixed[k, 1, i] = (1.0 if forward else -1.0) * w
+                continue
             if label in eps[corner] and not FIT_REGULAR:
                 data.fixed[k, 1, i] = sgn_end * eps[corner][label] * omega[corner]
             elif label in eps[corner]:
@@ -446,13 +558,13 @@ def _fit(
     # slope is a patch twist and the target exists; at a regular end the twist stays ω).
     pen_a, pen_b, pen_n = [], [], []
     for label, (_, targets) in data.items():
-        tm = mats[label][1].reshape(4, 2, 2, n_unk)
+        tm = mats[label][1].reshape(len(network.loops[label]), 2, 2, n_unk)
         has = (np.abs(tm[:, 0]).sum(axis=-1) > 0) & (np.abs(tm[:, 1]).sum(axis=-1) > 0)
         ids = network.loops[label]
         for k, end in zip(*np.nonzero(has), strict=True):
             pen_a.append(tm[k, 0, end] - tm[k, 1, end])
             pen_b.append(targets.fixed[k, 1, end] - targets.fixed[k, 0, end])
-            pen_n.append(network.normals[ids[(k + end) % 4]])
+            pen_n.append(network.normals[ids[(k + end) % len(ids)]])
     solution = guess
     for round_ in range(ROUNDS + 1):
         ata = np.zeros((n_unk, n_unk))
@@ -494,12 +606,15 @@ def _bicubic(
     bilinear: BilinearCoons, nodes: NDArray[np.float64], sides: bool = True
 ) -> BicubicCoons:
     """Bicubic Coons base on ``bilinear``'s sides (or on zero sides of dimension D) with the
-    ribbons of the inward node data ``nodes`` (4, 2, NODES, D)."""
-    rib = _to_ribbons([(nodes[k, 0], nodes[k, 1]) for k in range(4)])
+    ribbons of the inward node data ``nodes`` (S, 2, NODES, D), S = 3 or 4 sides."""
     curves = [bilinear.bottom, bilinear.right, bilinear.top, bilinear.left]
     if not sides:
         dim = nodes.shape[-1]
         curves = [PiecewiseBezier(np.zeros((c.n_curves, 4, dim)), c.breaks) for c in curves]
+    n_sides = nodes.shape[0]
+    rib = _to_ribbons(
+        [(nodes[k, 0], nodes[k, 1]) for k in range(n_sides)], curves[3], curves[1]
+    )
     return BicubicCoons(
         *curves, rib.d_bottom, rib.d_right, rib.d_top, rib.d_left, twists=rib.twists
     )
@@ -518,8 +633,18 @@ def _crease(edge: PiecewiseBezier, cross_a: NDArray[np.float64], cross_b: NDArra
     return bool(np.any(cos < np.cos(np.radians(CREASE_ANGLE))))
 
 
-def _to_ribbons(inward: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> Ribbons:
-    """Inward node data per loop side -> :class:`Ribbons` in the Coons convention."""
+def _to_ribbons(
+    inward: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+    left: PiecewiseBezier | None = None,
+    right: PiecewiseBezier | None = None,
+    normal: NDArray[np.float64] | None = None,
+) -> Ribbons:
+    """Inward node data per loop side -> :class:`Ribbons` in the Coons convention.
+
+    Three sides (bottom, right, left): a 3-sided patch, whose ``d_top`` is
+    :func:`~pde2cad.surfaces.coons.apex_ribbon` of its ``left`` and ``right`` sides with the
+    apex twists = the slopes of ``d_left`` and ``d_right`` at the apex (projected into the
+    plane of ``normal`` when given)."""
     breaks = BREAKS
 
     def curve(val: NDArray[np.float64], slope: NDArray[np.float64], reverse: bool, sign: float) -> PiecewiseBezier:
@@ -529,9 +654,17 @@ def _to_ribbons(inward: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -
 
     d_bottom = curve(*inward[0], False, 1.0)
     d_right = curve(*inward[1], False, -1.0)
-    d_top = curve(*inward[2], True, -1.0)
-    d_left = curve(*inward[3], True, 1.0)
     ends = np.array([0.0, 1.0])
+    if len(inward) == 3:
+        if left is None or right is None:
+            raise ValueError("a 3-sided patch's ribbons need its left and right sides")
+        d_left = curve(*inward[2], True, 1.0)
+        tl = d_left.derivative(ends[1:])[0]
+        tr = d_right.derivative(ends[1:])[0]
+        d_top = apex_ribbon(left, right, tl, tr, normal)
+    else:
+        d_top = curve(*inward[2], True, -1.0)
+        d_left = curve(*inward[3], True, 1.0)
     low, high = d_bottom.derivative(ends), d_top.derivative(ends)
     twists = np.stack([[low[0], high[0]], [low[1], high[1]]])  # twists[i, j] = S_uv(i, j)
     return Ribbons(d_bottom, d_right, d_top, d_left, twists)

@@ -424,6 +424,52 @@ def three_sided(c0: CurveLike, c1: CurveLike, c2: CurveLike) -> BilinearCoons:
     return BilinearCoons(c0, c1, PiecewiseBezier.from_point(c1.end), as_curve(c2).reversed())
 
 
+def apex_ribbon(
+    left: CurveLike,
+    right: CurveLike,
+    twist_left: ArrayLike,
+    twist_right: ArrayLike,
+    normal: ArrayLike | None = None,
+) -> PiecewiseBezier:
+    """Cross-boundary derivative ``d_top(u) = S_v(u, 1)`` of a 3-sided bicubic Coons patch.
+
+    The top side of the 3-sided patch (Fig. 5.11) is the apex, a point, so ``top'(u) = 0``
+    and the corner data of Eqs. 5.6-5.7 at ``(0, 1)`` and ``(1, 1)`` read: ``S_u = 0`` (the
+    left and right ribbons vanish at the apex), ``S_v(0, 1) = left'(1)``,
+    ``S_v(1, 1) = right'(1)`` (the sides' derivatives pointing into the apex) and
+    ``S_uv(i, 1)`` = the twists, which are also the slopes of ``d_left`` and ``d_right`` at
+    the apex. The single cubic Hermite through these data,
+    ``d_top = H0(u) left'(1) + H1(u) right'(1) + H2(u) twist_left + H3(u) twist_right``
+    (Eq. 5.4's blends), satisfies all of them. Near the apex
+    ``S(u, 1 - e) ~ apex - e d_top(u)`` and ``S_u ~ -e d_top'(u)``, so the limit normal is
+    ``d_top x d_top'``: with the four vectors in one plane the apex has ONE tangent plane.
+    (``d_top = (1 - u) left'(1) + u right'(1)`` is the case ``twist = right'(1) - left'(1)``.)
+
+    Parameters
+    ----------
+    left, right : PiecewiseBezier or array
+        The sides ``S(0, v)`` and ``S(1, v)``, both ending at the apex (module convention).
+    twist_left, twist_right : (D,) float
+        ``S_uv(0, 1)`` and ``S_uv(1, 1)``.
+    normal : (D,) float, optional
+        Normal of the apex's tangent plane: the twists are projected into that plane (the
+        side derivatives are the edges' own and are kept).
+
+    Returns
+    -------
+    PiecewiseBezier
+        One cubic piece on [0, 1].
+    """
+    end = np.array([1.0])
+    values = np.vstack([as_curve(left).derivative(end)[0], as_curve(right).derivative(end)[0]])
+    slopes = np.vstack([np.asarray(twist_left, dtype=float), np.asarray(twist_right, dtype=float)])
+    if normal is not None:
+        nrm = np.asarray(normal, dtype=float)
+        nrm = nrm / max(float(np.linalg.norm(nrm)), 1e-300)
+        slopes = slopes - np.outer(slopes @ nrm, nrm)
+    return PiecewiseBezier.from_hermite(values, slopes, np.array([0.0, 1.0]))
+
+
 class BicubicCoons(_BooleanSumPatch):
     """Bicubically blended Coons patch (Eqs. 5.2-5.7), the base patch for C1 continuity.
 
