@@ -72,12 +72,6 @@ RIDGE = 1e-6
 #: Weight of the tangent-plane agreement of the ribbons' end slopes at odd-valence corners,
 #: relative to the mean diagonal of the normal equations.
 G1_WEIGHT = 1.0
-#: Refit by least squares also what needs no compromise: ribbons of edges whose corners
-#: are all regular, twists there, and unshared sides (open boundary, creases). Off, these
-#: keep the per-patch estimates (averaged across paired edges), which measured slightly
-#: better after the deformation on the cylinder (the base fit weighs the interior, which the
-#: deformation handles anyway) though worse on the torus.
-FIT_REGULAR = False
 #: Re-projections of the points onto the fitted bases (each followed by a refit).
 ROUNDS = 1
 #: 3-sided patches: apex twists of a uniform sweep of the tangent directions (see
@@ -268,7 +262,7 @@ def shared_ribbons(network: EdgeNetwork, c0_patches: dict[int, Patch]) -> dict[i
         if _crease(network.curves[key], va, -vb):
             continue  # a real crease: each side keeps its own ribbon (C0 there)
         if all(eps[c] or at_apex[j][0] for j, c in enumerate(key)):
-            sides.update(_paired_edge(key, users, (va, sa), (vb, sb), unknowns))
+            sides.update(_paired_edge(key, users, (va, sa), (vb, sb)))
         else:
             sides.update(_split_edge(network.curves[key], key, users, (va, sa), (vb, sb), unknowns))
         for j, c in enumerate(key):
@@ -378,21 +372,17 @@ def _paired_edge(
     users: list[int],
     own_a: tuple[NDArray[np.float64], NDArray[np.float64]],
     own_b: tuple[NDArray[np.float64], NDArray[np.float64]],
-    unknowns: _Unknowns,
 ) -> dict[tuple[int, Key], _Terms]:
     """Both ends regular: ``+D`` for the first user, ``-D`` for the second (exact C1)."""
     guess_val = (own_a[0] - own_b[0]) / 2
     guess_slope = (own_a[1] - own_b[1]) / 2
     out = {}
     for label, sign in zip(users, (1.0, -1.0), strict=True):
+        # Not refitted: the averaged estimates measured better after the deformation on the
+        # cylinder than a least-squares refit of the bases (which weighs the interior, where
+        # the deformation works anyway), though slightly worse on the torus.
         terms = _Terms((2, NODES))
-        if not FIT_REGULAR:
-            terms.fixed[0], terms.fixed[1] = sign * guess_val, sign * guess_slope
-            out[(label, key)] = terms
-            continue
-        for i in range(1, NODES - 1):
-            terms.add((0, i), unknowns.get(("edge", key, 0, i), guess_val[i]), sign)
-            terms.add((1, i), unknowns.get(("edge", key, 1, i), guess_slope[i]), sign)
+        terms.fixed[0], terms.fixed[1] = sign * guess_val, sign * guess_slope
         out[(label, key)] = terms
     return out
 
@@ -471,7 +461,6 @@ def _patch_terms(
     nodes = NODES
     data = _Terms((n_sides, 2, nodes))
     targets = _Terms((n_sides, 2, 2))
-    inner = range(1, nodes - 1)
     for k in range(n_sides):
         a, b = ids[k], ids[(k + 1) % n_sides]
         key = key_of(a, b)
@@ -497,10 +486,6 @@ def _patch_terms(
                 for end, i in ((0, 0), (1, nodes - 1)):
                     t = i if forward else nodes - 1 - i
                     targets.fixed[k, 1, end] = sgn * edge.fixed[2, t]
-        elif FIT_REGULAR:
-            for i in inner:
-                data.add((k, 0, i), unknowns.get(("side", label, k, 0, i), val_own[i]), 1.0)
-                data.add((k, 1, i), unknowns.get(("side", label, k, 1, i), slope_own[i]), 1.0)
         else:
             data.fixed[k, :, 1:-1] = np.stack([val_own, slope_own])[:, 1:-1]
         # End slopes: the twist at each corner (inward slope away from it), +tau at the
@@ -519,12 +504,8 @@ def _patch_terms(
                 else:
                     data.fixed[k, 1, i] = (1.0 if forward else -1.0) * w
                 continue
-            if label in eps[corner] and not FIT_REGULAR:
+            if label in eps[corner]:
                 data.fixed[k, 1, i] = sgn_end * eps[corner][label] * omega[corner]
-            elif label in eps[corner]:
-                e = eps[corner][label]
-                x = unknowns.get(("corner", corner), omega[corner])
-                data.add((k, 1, i), x, sgn_end * e)
             else:
                 x = unknowns.get(("twist", label, corner), guess)
                 data.add((k, 1, i), x, sgn_end)
