@@ -273,3 +273,29 @@ def test_flat_top_deformation_has_no_slope_across_the_apex_side() -> None:
     assert flat.rms_error <= 0.01 * np.abs(target).max()
     with pytest.raises(InputError, match="flat_top"):
         fit_deformation(target, p, 4, 4, kind="c1full", flat_top=True)
+
+
+def test_fit_patch_auto_terms_caps_dense_and_three_sided_patches() -> None:
+    """Automatic terms stop at AUTO_DENSE_TERMS above AUTO_DENSE_POINTS points (the fit costs
+    points x terms^2) and at the 3-sided candidates on a triangle (its points thin out towards
+    the apex), even for a shape that would take more."""
+    from pde2cad.surfaces.patch import (
+        AUTO_DENSE_POINTS,
+        AUTO_DENSE_TERMS,
+        AUTO_TERMS_THREE_SIDED,
+        fit_patch,
+    )
+
+    side = int(np.ceil(np.sqrt(AUTO_DENSE_POINTS))) + 10
+    g = np.linspace(0.0, 1.0, side)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    bump = 0.2 * np.exp(-((x - 0.3) ** 2 + (y - 0.6) ** 2) / 0.005)
+    pts = np.column_stack([x, y, bump * np.sin(np.pi * x) * np.sin(np.pi * y)])
+    corners = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    dense = fit_patch(pts, m="auto", n="auto", corners=corners)
+    assert len(pts) > AUTO_DENSE_POINTS and dense.deformation.m == AUTO_DENSE_TERMS
+    few = fit_patch(pts[::4], m="auto", n="auto", corners=corners)
+    assert few.deformation.m > AUTO_DENSE_TERMS  # the bump does want more terms
+    tri = (x + y <= 1.0) & (np.arange(len(x)) % 4 == 0)
+    triangle = fit_patch(pts[tri], m="auto", n="auto", corners=[[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    assert len(triangle.sides) == 3 and triangle.deformation.m <= max(AUTO_TERMS_THREE_SIDED)
