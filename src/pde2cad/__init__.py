@@ -9,8 +9,16 @@ from __future__ import annotations
 
 import sys
 import types
+from typing import TYPE_CHECKING, Literal, Union
 
 from pde2cad.errors import ExportError, FitError, InputError, Pde2CadError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from numpy.typing import ArrayLike
+
+    from pde2cad.reconstruct import Reconstruction, SurfaceModel
 
 __version__ = "0.1.0"
 
@@ -22,6 +30,7 @@ __all__ = [
     "__version__",
     "fit_patch",
     "fit_pde_surface",
+    "fit_surfaces",
     "reconstruct",
     "vectorize",
 ]
@@ -50,12 +59,46 @@ def fit_pde_surface(points, params=None, **options):  # noqa: ANN001, ANN201
     return _fit(points, params, **options)
 
 
-def reconstruct(points, labels, **options):  # noqa: ANN001, ANN201
-    """Reconstruct a segmented point cloud as sewn B-spline patches; see
-    :func:`pde2cad.reconstruct.reconstruct`."""
+def fit_surfaces(
+    points: ArrayLike,
+    labels: ArrayLike,
+    *,
+    m: Union[int, Literal["auto"]] = "auto",
+    n: Union[int, Literal["auto"]] = "auto",
+    continuity: Literal["c0", "c1"] = "c0",
+    tolerance: float | None = None,
+    cad_tolerance: float | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> SurfaceModel:
+    """Fit kernel-neutral B-spline surfaces to a segmented point cloud (no CAD kernel needed);
+    see :func:`pde2cad.reconstruct.fit_surfaces`."""
+    from pde2cad.reconstruct import fit_surfaces as _fit_surfaces
+
+    return _fit_surfaces(
+        points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
+        cad_tolerance=cad_tolerance, progress=progress,
+    )
+
+
+def reconstruct(
+    points: ArrayLike,
+    labels: ArrayLike,
+    *,
+    m: Union[int, Literal["auto"]] = "auto",
+    n: Union[int, Literal["auto"]] = "auto",
+    continuity: Literal["c0", "c1"] = "c0",
+    tolerance: float | None = None,
+    cad_tolerance: float | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Reconstruction:
+    """Reconstruct a segmented point cloud as sewn B-spline patches (an OCP shape; needs
+    ``pde2cad[cad]``); see :func:`pde2cad.reconstruct.reconstruct`."""
     from pde2cad.reconstruct import reconstruct as _reconstruct
 
-    return _reconstruct(points, labels, **options)
+    return _reconstruct(
+        points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
+        cad_tolerance=cad_tolerance, progress=progress,
+    )
 
 
 class _CallableModule(types.ModuleType):

@@ -1,16 +1,22 @@
-"""Multi-patch reconstruction of a segmented point cloud: cloud -> sewn B-spline shell.
+"""Multi-patch reconstruction of a segmented point cloud: cloud -> B-spline surfaces -> shape.
 
-Pipeline:
+Two stages, split at the CAD kernel:
 
-1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners.
-2. :func:`~pde2cad.layout.edges.build_edges`: refined corners, each segment's side loop, and
-   ONE curve per edge (fitted to the border midline of both segments, or to the open-boundary
-   run), used by every patch on that edge (reversed where its loop runs the other way), so
-   neighbours interpolate the identical curve.
-3. Per segment, :func:`~pde2cad.surfaces.patch.fit_patch` with those sides: bilinear Coons +
-   sine deformation (C0), or bicubic Coons with the shared ribbons of
-   :func:`~pde2cad.layout.ribbons.build_ribbons` + C1 deformation (C1).
-4. :func:`~pde2cad.bspline.convert.patch_to_bspline`, faces and :func:`~pde2cad.occ.sew`.
+- :func:`fit_surfaces` (numpy/scipy only, runs inside FreeCAD's Python too) makes the
+  kernel-neutral :class:`SurfaceModel`:
+
+  1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners.
+  2. :func:`~pde2cad.layout.edges.build_edges`: refined corners, each segment's side loop, and
+     ONE curve per edge (fitted to the border midline of both segments, or to the open-boundary
+     run), used by every patch on that edge (reversed where its loop runs the other way), so
+     neighbours interpolate the identical curve.
+  3. Per segment, :func:`~pde2cad.surfaces.patch.fit_patch` with those sides: bilinear Coons +
+     sine deformation (C0), or bicubic Coons with the shared ribbons of
+     :func:`~pde2cad.layout.ribbons.build_ribbons` + C1 deformation (C1).
+  4. :func:`~pde2cad.bspline.convert.patch_to_bspline` per patch.
+
+- A kernel adapter turns the model into a shape: :func:`pde2cad.occ.build.build_shape` (OCP:
+  faces, sewing; :func:`reconstruct` uses it) or ``pde2cad.fc.shape.build_shape`` (FreeCAD).
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,11 +35,12 @@ from scipy.spatial import cKDTree
 from pde2cad.bspline.convert import patch_to_bspline
 from pde2cad.bspline.data import BSplineSurface
 from pde2cad.errors import FitError, InputError
+from pde2cad.io.clouds import as_labels
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.surfaces.boundary import PiecewiseBezier
-from pde2cad.surfaces.patch import Patch, fit_patch
+from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
 
 #: Default CAD (deformation -> B-spline) tolerance, relative to the cloud's bbox diagonal.
 CAD_TOLERANCE = 1e-4
@@ -57,43 +64,76 @@ def _report(progress: Progress | None, stage: str, done: int, total: int) -> Non
 
 
 @dataclass
-class Reconstruction:
-    """Result of :func:`reconstruct`.
+class SurfaceModel:
+    """Kernel-neutral result of :func:`fit_surfaces`: everything a CAD adapter needs.
+
+    All geometry is in the caller's coordinates (the fit itself runs in a centred,
+    normalised frame, see :func:`fit_surfaces`).
 
     Attributes
     ----------
-    shape : TopoDS_Shape
-        Sewn shell (or solid when closed).
-    patches : dict[int, Patch]
-        Fitted patch per segment label.
     surfaces : dict[int, BSplineSurface]
         B-spline surface per segment label.
-    faces : list of TopoDS_Face
-        One face per segment, in ``labels`` order.
     labels : list of int
-        Segment label of each face.
-    sew_info : SewInfo
+        Segment labels in face order (sorted).
+    patches : dict[int, Patch]
+        Fitted patch per segment label.
+    network : EdgeNetwork
+        Corners, side loops, edge curves and their fit errors.
     layout : Layout
     edges : dict[(int, int), PiecewiseBezier]
         The shared curve of each edge, keyed by sorted global corner ids, running from the
-        smaller id to the larger.
+        smaller id to the larger (``network.curves``).
     edge_errors : dict[(int, int), float]
         Largest distance of the points fitted to each edge curve (bin means of the border
         band for shared edges).
     corners : (C, 3) float
-        The corner positions used (the layout's).
+        The corner positions used (the network's).
     diagonal : float
         Bounding-box diagonal of the cloud.
-    timings : dict[str, float]
-        Seconds per stage.
-    network : EdgeNetwork
-        Corners, side loops, edge curves and their fit errors.
     c0_fallback : list of int
         With ``continuity="c1"``: segments fitted C0 instead (too sparse for ribbons, or
         whose C1 fit was more than ``C1_ERROR_RATIO`` times worse and above
         ``C1_ERROR_FLOOR`` of the diagonal); their edges are only positionally joined.
         3-sided segments are fitted C1 like 4-sided ones (bicubic base with a collapsed top,
         see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
+    timings : dict[str, float]
+        Seconds per stage.
+    """
+
+    surfaces: dict[int, BSplineSurface]
+    labels: list[int]
+    patches: dict[int, Patch]
+    network: EdgeNetwork
+    layout: Layout
+    edges: dict[tuple[int, int], PiecewiseBezier]
+    edge_errors: dict[tuple[int, int], float]
+    corners: NDArray[np.float64]
+    diagonal: float
+    c0_fallback: list[int] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def sew_tolerance(self) -> float:
+        """Tolerance for sewing the faces (``SEW_TOLERANCE`` x diagonal; shared edges are
+        identical curves, so any kernel can sew this tight)."""
+        return SEW_TOLERANCE * self.diagonal
+
+
+@dataclass
+class Reconstruction:
+    """Result of :func:`reconstruct`: a :class:`SurfaceModel` made into an OCP shape.
+
+    Attributes
+    ----------
+    shape : TopoDS_Shape
+        Sewn shell (or solid when closed).
+    patches, surfaces, labels, layout, edges, edge_errors, corners, diagonal, timings,
+    network, c0_fallback
+        As in :class:`SurfaceModel`.
+    faces : list of TopoDS_Face
+        One face per segment, in ``labels`` order.
+    sew_info : SewInfo
     """
 
     shape: Any
@@ -111,11 +151,29 @@ class Reconstruction:
     network: EdgeNetwork | None = None
     c0_fallback: list[int] = field(default_factory=list)
 
-    def write_step(self, path: str | Path, units: str = "MM") -> Path:
-        """Write the sewn shape to a STEP file."""
+    def write_step(self, path: str | Path, units: str = "MM", **options: Any) -> Path:
+        """Write the sewn shape to a STEP file (options: see :func:`pde2cad.occ.write_step`)."""
         from pde2cad.occ import write_step
 
-        return write_step(self.shape, path, units=units)
+        return write_step(self.shape, path, units=units, **options)
+
+    def write_iges(self, path: str | Path, units: str = "MM", **options: Any) -> Path:
+        """Write the sewn shape to an IGES file (options: see :func:`pde2cad.occ.write_iges`)."""
+        from pde2cad.occ import write_iges
+
+        return write_iges(self.shape, path, units=units, **options)
+
+    def to_build123d(self) -> Any:
+        """The shape as a build123d ``Solid`` (closed) or ``Shell`` (open)."""
+        from pde2cad.occ import to_build123d
+
+        return to_build123d(self.shape)
+
+    def to_cadquery(self) -> Any:
+        """The shape as a CadQuery ``Solid`` (closed) or ``Shell`` (open)."""
+        from pde2cad.occ import to_cadquery
+
+        return to_cadquery(self.shape)
 
 
 def apex_first(network: EdgeNetwork) -> EdgeNetwork:
@@ -147,18 +205,172 @@ def apex_first(network: EdgeNetwork) -> EdgeNetwork:
     return dataclasses.replace(network, loops=loops)
 
 
-def reconstruct(
+Terms = Union[int, Literal["auto"]]
+
+
+def check_cloud(points: ArrayLike, labels: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Validate a labelled cloud at the API's door.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like of numbers
+    labels : (N,) array_like of integers (or floats that are whole numbers)
+
+    Returns
+    -------
+    points : (N, 3) float
+    labels : (N,) int64
+
+    Raises
+    ------
+    InputError
+        Wrong types (strings, None, ragged lists), wrong shapes, NaN/inf coordinates, a
+        label count that differs from the point count, or labels that are not whole numbers.
+    """
+    try:
+        raw = np.asarray(points)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"points must be an (N, 3) array of numbers; could not read them ({exc})") from None
+    if raw.dtype.kind not in "iuf" or raw.ndim != 2 or raw.shape[1] != 3 or len(raw) == 0:
+        raise InputError(
+            f"points must be an (N, 3) array of numbers, got shape {raw.shape} of dtype {raw.dtype}"
+        )
+    pts = raw.astype(np.float64)
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        raise InputError(
+            f"points contain {int(bad.sum())} NaN/inf coordinates (first at point "
+            f"{int(np.flatnonzero(bad)[0])}); drop or repair them first"
+        )
+    if labels is None or isinstance(labels, (str, bytes)):
+        raise InputError(f"labels must be one integer per point, got {labels!r}")
+    try:
+        lab = np.asarray(labels)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"labels must be one integer per point; could not read them ({exc})") from None
+    return pts, as_labels(lab, len(pts), "the labels argument")
+
+
+def _check_options(continuity: str, tolerance: float | None, cad_tolerance: float | None) -> None:
+    for name, value in (("tolerance", tolerance), ("cad_tolerance", cad_tolerance)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+            raise InputError(f"{name} must be a positive number, got {value!r}")
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number, got {value}")
+    if continuity not in ("c0", "c1"):
+        raise InputError(f"continuity must be 'c0' or 'c1', got {continuity!r}")
+
+
+def _build_network(
+    pts: NDArray[np.float64], lab: NDArray[np.int64], continuity: str,
+    timings: dict[str, float], progress: Progress | None,
+) -> tuple[Layout, EdgeNetwork]:
+    """Steps 1-2 of :func:`fit_surfaces`: the layout, then the edge network."""
+    t0 = time.perf_counter()
+    _report(progress, "layout", 0, 1)
+    layout = build_layout(pts, lab, check=False)
+    # The layout's own KD-tree of the points when it keeps one; otherwise a sliding-midpoint
+    # tree (a third faster to build on a million points, the same exact queries).
+    tree = getattr(layout, "tree", None)
+    if tree is None:
+        tree = cKDTree(pts, balanced_tree=False)
+    timings["layout"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    _report(progress, "edges", 0, 1)
+    network = build_edges(pts, lab, layout, tree)
+    if continuity == "c1":
+        # 3-sided patches: put their apex where a C1 pole can form (e.g. triangles around it).
+        network = apex_first(network)
+    timings["edges"] = time.perf_counter() - t0
+    return layout, network
+
+
+def _fit_c1(
+    patches: dict[int, Patch], network: EdgeNetwork, m: Terms, n: Terms,
+    tolerance: float | None, diagonal: float, tick: Callable[[], None],
+) -> list[int]:
+    """Refit every patch C1 on the shared ribbons; returns the labels kept C0."""
+    order = sorted(patches)
+    # The ribbons are estimated from the C0 fits' own parameters (no second projection).
+    ribbons = shared_ribbons(network, patches)
+    fallback = [label for label in order if label not in ribbons]
+    for label in order:
+        tick()
+        if label not in ribbons:
+            continue
+        c0 = patches[label]
+        try:
+            # Same points and sides as the C0 fit: reuse its bilinear parameters, and
+            # its automatic term count (the same shape detail on the same points).
+            m1, n1 = (c0.deformation.m, c0.deformation.n) if m == "auto" else (m, n)
+            c1: Patch | None = fit_patch(
+                c0.points, continuity="c1", m=m1, n=n1, tolerance=tolerance,
+                boundary=c0.sides, ribbons=ribbons[label], params=c0.params,
+                outside=c0.outside,
+            )
+        except FitError:
+            c1 = None
+        # A bicubic base can misbehave near degenerate corners (two sides tangent) and
+        # creases (measured on the pot: 4 of its 9 patches): keep the C0 fit then, and
+        # say so in c0_fallback.
+        # fit_errors: the fit's own mean (Patch.errors would project every point again).
+        if c1 is not None and c1.fit_errors["mean"] <= max(
+            C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR * diagonal
+        ):
+            patches[label] = c1
+        else:
+            fallback.append(label)
+    return fallback
+
+
+def _fit_patches(
+    pts: NDArray[np.float64], lab: NDArray[np.int64], network: EdgeNetwork, m: Terms,
+    n: Terms, continuity: str, tolerance: float | None, diagonal: float,
+    progress: Progress | None,
+) -> tuple[dict[int, Patch], list[int]]:
+    """Step 3 of :func:`fit_surfaces`: one C0 patch per segment, then (C1) the C1 refits."""
+    order = sorted(network.loops)
+    steps = len(order) * (2 if continuity == "c1" else 1)
+    done = iter(range(steps))
+
+    def tick() -> None:
+        _report(progress, "patches", next(done), steps)
+
+    patches: dict[int, Patch] = {}
+    for label in order:
+        tick()
+        patches[label] = fit_patch(
+            pts[lab == label], continuity="c0", m=m, n=n, tolerance=tolerance,
+            boundary=network.sides(label),
+        )
+    fallback = _fit_c1(patches, network, m, n, tolerance, diagonal, tick) if continuity == "c1" else []
+    _report(progress, "patches", steps, steps)
+    return patches, fallback
+
+
+def fit_surfaces(
     points: ArrayLike,
     labels: ArrayLike,
     *,
-    m: int | str = "auto",
-    n: int | str = "auto",
-    continuity: str = "c0",
+    m: Terms = "auto",
+    n: Terms = "auto",
+    continuity: Continuity = "c0",
     tolerance: float | None = None,
     cad_tolerance: float | None = None,
     progress: Progress | None = None,
-) -> Reconstruction:
-    """Reconstruct a segmented cloud as C0-joined B-spline faces sewn into one shape.
+) -> SurfaceModel:
+    """Fit one B-spline surface per segment of a labelled cloud, joined on shared edges.
+
+    The kernel-neutral stage of :func:`reconstruct` (numpy/scipy only): no CAD kernel is
+    imported, so it runs in FreeCAD's Python as well as with OCP.
+
+    1. Validate the cloud (:func:`check_cloud`) and the options.
+    2. Layout and edge network (:func:`_build_network`).
+    3. Patches, C0 then optionally C1 (:func:`_fit_patches`).
+    4. Each patch to a B-spline surface within ``cad_tolerance``.
 
     Parameters
     ----------
@@ -188,107 +400,69 @@ def reconstruct(
 
     Returns
     -------
-    Reconstruction
+    SurfaceModel
     """
-    from pde2cad.occ import make_face, sew  # OCP is optional: imported only here
-
-    pts = np.asarray(points, dtype=float)
-    lab = np.asarray(labels).astype(np.int64)
-    if pts.ndim != 2 or pts.shape[1] != 3 or len(lab) != len(pts):
-        raise InputError(f"points must be (N, 3) with one label each; got {pts.shape}, {lab.shape}")
-    if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
-        raise InputError(f"tolerance must be a positive number, got {tolerance}")
-    if continuity not in ("c0", "c1"):
-        raise InputError(f"continuity must be 'c0' or 'c1', got {continuity!r}")
+    pts, lab = check_cloud(points, labels)
+    _check_options(continuity, tolerance, cad_tolerance)
     diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
     timings: dict[str, float] = {}
+    layout, network = _build_network(pts, lab, continuity, timings, progress)
 
     t0 = time.perf_counter()
-    _report(progress, "layout", 0, 1)
-    layout = build_layout(pts, lab, check=False)
-    # The layout's own KD-tree of the points when it keeps one; otherwise a sliding-midpoint
-    # tree (a third faster to build on a million points, the same exact queries).
-    tree = getattr(layout, "tree", None)
-    if tree is None:
-        tree = cKDTree(pts, balanced_tree=False)
-    timings["layout"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    _report(progress, "edges", 0, 1)
-    network = build_edges(pts, lab, layout, tree)
-    if continuity == "c1":
-        # 3-sided patches: put their apex where a C1 pole can form (e.g. triangles around it).
-        network = apex_first(network)
-    timings["edges"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    patches: dict[int, Patch] = {}
-    order = sorted(network.loops)
-    steps = len(order) * (2 if continuity == "c1" else 1)
-    for done, label in enumerate(order):
-        _report(progress, "patches", done, steps)
-        patches[label] = fit_patch(
-            pts[lab == label], continuity="c0", m=m, n=n, tolerance=tolerance,
-            boundary=network.sides(label),
-        )
-    fallback: list[int] = []
-    if continuity == "c1":
-        # The ribbons are estimated from the C0 fits' own parameters (no second projection).
-        ribbons = shared_ribbons(network, patches)
-        fallback = [label for label in order if label not in ribbons]
-        for done, label in enumerate(order, start=len(order)):
-            _report(progress, "patches", done, steps)
-            if label not in ribbons:
-                continue
-            c0 = patches[label]
-            try:
-                # Same points and sides as the C0 fit: reuse its bilinear parameters, and
-                # its automatic term count (the same shape detail on the same points).
-                m1, n1 = (c0.deformation.m, c0.deformation.n) if m == "auto" else (m, n)
-                c1 = fit_patch(
-                    c0.points, continuity="c1", m=m1, n=n1, tolerance=tolerance,
-                    boundary=c0.sides, ribbons=ribbons[label], params=c0.params,
-                    outside=c0.outside,
-                )
-            except FitError:
-                c1 = None
-            # A bicubic base can misbehave near degenerate corners (two sides tangent) and
-            # creases (measured on the pot: 4 of its 9 patches): keep the C0 fit then, and
-            # say so in c0_fallback.
-            # fit_errors: the fit's own mean (Patch.errors would project every point again).
-            if c1 is not None and c1.fit_errors["mean"] <= max(
-                C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR * diagonal
-            ):
-                patches[label] = c1
-            else:
-                fallback.append(label)
-    _report(progress, "patches", steps, steps)
+    patches, fallback = _fit_patches(
+        pts, lab, network, m, n, continuity, tolerance, diagonal, progress
+    )
     timings["patches"] = time.perf_counter() - t0
 
-    # Step 4: B-splines, faces, sewing.
     t0 = time.perf_counter()
     cad_tol = float(cad_tolerance) if cad_tolerance is not None else CAD_TOLERANCE * diagonal
     _report(progress, "cad", 0, 1)
     surfaces = {
         label: patch_to_bspline(p.base, p.deformation, cad_tol) for label, p in patches.items()
     }
-    faces = [make_face(surfaces[label]) for label in order]
-    shape, info = sew(faces, tolerance=SEW_TOLERANCE * diagonal)
+    timings["bspline"] = time.perf_counter() - t0
+    return SurfaceModel(
+        surfaces=surfaces, labels=sorted(patches), patches=patches, network=network,
+        layout=layout, edges=network.curves, edge_errors=network.errors,
+        corners=network.corners, diagonal=diagonal, c0_fallback=fallback, timings=timings,
+    )
+
+
+def reconstruct(
+    points: ArrayLike,
+    labels: ArrayLike,
+    *,
+    m: Terms = "auto",
+    n: Terms = "auto",
+    continuity: Continuity = "c0",
+    tolerance: float | None = None,
+    cad_tolerance: float | None = None,
+    progress: Progress | None = None,
+) -> Reconstruction:
+    """Reconstruct a segmented cloud as B-spline faces sewn into one OCP shape.
+
+    :func:`fit_surfaces` followed by the OCP adapter
+    :func:`pde2cad.occ.build.build_shape` (faces, sewing; needs ``pde2cad[cad]``).
+    Parameters as in :func:`fit_surfaces`.
+
+    Returns
+    -------
+    Reconstruction
+    """
+    model = fit_surfaces(
+        points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
+        cad_tolerance=cad_tolerance, progress=progress,
+    )
+    from pde2cad.occ.build import build_shape  # OCP is optional: imported only here
+
+    t0 = time.perf_counter()
+    shape, faces, info = build_shape(model)
     _report(progress, "cad", 1, 1)
-    timings["cad"] = time.perf_counter() - t0
+    timings = dict(model.timings)
+    timings["cad"] = timings.pop("bspline") + time.perf_counter() - t0
     return Reconstruction(
-        shape=shape,
-        patches=patches,
-        surfaces=surfaces,
-        faces=faces,
-        labels=order,
-        sew_info=info,
-        layout=layout,
-        edges=network.curves,
-        corners=network.corners,
-        edge_errors=network.errors,
-        network=network,
-        c0_fallback=fallback,
-        diagonal=diagonal,
-        timings=timings,
+        shape=shape, patches=model.patches, surfaces=model.surfaces, faces=faces,
+        labels=model.labels, sew_info=info, layout=model.layout, edges=model.edges,
+        edge_errors=model.edge_errors, corners=model.corners, diagonal=model.diagonal,
+        timings=timings, network=model.network, c0_fallback=model.c0_fallback,
     )

@@ -1,0 +1,84 @@
+"""The kernel-neutral stage :func:`pde2cad.fit_surfaces`: no CAD kernel, same geometry as the
+OCP path, input checked at the door."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pde2cad import samples
+from pde2cad.errors import InputError
+from pde2cad.reconstruct import fit_surfaces
+
+HEAVY = ("OCP", "FreeCAD", "Part", "ezdxf", "open3d", "matplotlib", "cadquery", "build123d")
+
+
+def test_fit_surfaces_loads_no_cad_kernel() -> None:
+    """Import and run the whole kernel-neutral stage in a fresh process: no OCP (or other
+    heavy module) may get loaded, and the surfaces must interpolate the shared corners."""
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "import pde2cad\n"
+        "from pde2cad import samples\n"
+        "cloud = samples.sheet(6000, seed=1)\n"
+        "model = pde2cad.fit_surfaces(cloud.points, cloud.labels, continuity='c1')\n"
+        "assert len(model.surfaces) == 4 and model.labels == [0, 1, 2, 3]\n"
+        "assert model.sew_tolerance > 0\n"
+        f"bad = [m for m in {HEAVY!r} if m in sys.modules]\n"
+        "assert not bad, bad\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+
+
+def _corner_of(surface, u: float, v: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    return np.asarray(surface.evaluate(np.array([u]), np.array([v]))).reshape(3)
+
+
+def test_surfaces_meet_at_the_network_corners() -> None:
+    """Every surface's four parameter corners are network corners (to 1e-9 D): the model
+    alone, without a kernel, already describes a closed-up net of patches."""
+    cloud = samples.torus(20000)
+    model = fit_surfaces(cloud.points, cloud.labels)
+    assert len(model.surfaces) == 16 and len(model.corners) == 16
+    assert set(model.edges) == set(model.edge_errors) and len(model.edges) == 32
+    for label, s in model.surfaces.items():
+        u0, u1 = float(s.knots_u[0]), float(s.knots_u[-1])
+        v0, v1 = float(s.knots_v[0]), float(s.knots_v[-1])
+        for u, v in ((u0, v0), (u1, v0), (u1, v1), (u0, v1)):
+            d = np.linalg.norm(model.corners - _corner_of(s, u, v), axis=1).min()
+            assert d <= 1e-9 * model.diagonal, label
+    assert cloud.distance(model.corners).max() <= 2e-4 * cloud.diagonal
+
+
+@pytest.mark.parametrize(
+    "points, labels, message",
+    [
+        ("abc", [0], "array of numbers"),
+        (None, [0], "array of numbers"),
+        ([[0, 0, 0], [1, 1]], [0, 0], "points must be"),
+        ([["a", "b", "c"]], [0], "array of numbers"),
+        (np.zeros((4, 2)), np.zeros(4), "(N, 3)"),
+        (np.zeros((0, 3)), np.zeros(0), "(N, 3)"),
+        (np.array([[0, 0, np.nan], [1, 1, 1]]), [0, 0], "NaN/inf"),
+        (np.zeros((3, 3)), None, "one integer per point, got None"),
+        (np.zeros((3, 3)), "abc", "one integer per point"),
+        (np.zeros((3, 3)), [[0], [1, 2], [3]], "labels"),
+        (np.zeros((3, 3)), [0, 1], "have 2 values but the cloud has 3 points"),
+        (np.zeros((3, 3)), [0.2, 0.7, 1.0], "must be integers"),
+    ],
+)
+def test_wrong_types_are_input_errors(points: object, labels: object, message: str) -> None:
+    with pytest.raises(InputError) as info:
+        fit_surfaces(points, labels)  # type: ignore[arg-type]
+    assert message in str(info.value)
+
+
+def test_float_labels_that_are_whole_numbers_are_taken() -> None:
+    cloud = samples.sheet(6000, seed=1)
+    model = fit_surfaces(cloud.points, cloud.labels.astype(float) + 10.0)
+    assert model.labels == [10, 11, 12, 13]
