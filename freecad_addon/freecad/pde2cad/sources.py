@@ -24,11 +24,11 @@ SEED = 0
 
 
 def is_points(obj: Any) -> bool:
-    return obj is not None and obj.isDerivedFrom("Points::Feature")
+    return hasattr(obj, "isDerivedFrom") and obj.isDerivedFrom("Points::Feature")
 
 
 def is_mesh(obj: Any) -> bool:
-    return obj is not None and obj.isDerivedFrom("Mesh::Feature")
+    return hasattr(obj, "isDerivedFrom") and obj.isDerivedFrom("Mesh::Feature")
 
 
 def _mesh_arrays(mesh: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
