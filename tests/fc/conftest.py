@@ -92,11 +92,22 @@ class FreeCADRun:
         return out
 
 
-@pytest.fixture
-def freecad(tmp_path: Path) -> FreeCADRun:
+def _need_freecadcmd() -> None:
     if shutil.which("freecadcmd") is None:
         pytest.skip("FreeCAD 0.20 is not installed (apt-get install freecad-python3)")
+
+
+@pytest.fixture
+def freecad(tmp_path: Path) -> FreeCADRun:
+    _need_freecadcmd()
     return FreeCADRun(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def freecad_module(tmp_path_factory: pytest.TempPathFactory) -> FreeCADRun:
+    """One runner (and folder) for a whole test module, to share one expensive run."""
+    _need_freecadcmd()
+    return FreeCADRun(tmp_path_factory.mktemp("freecad"))
 
 
 @pytest.fixture

@@ -106,14 +106,15 @@ class OutlineFeature(Feature):
         drawing = self.drawing(obj)
         self.last_drawing = drawing
         shape = outline_shape(drawing, scale)
-        shape.Placement = plane_placement(str(obj.Plane))
+        # A Part feature's Placement property places its Shape (it wins over the shape's own).
+        obj.Placement = plane_placement(str(obj.Plane))
         obj.Loops, obj.Curves = len(drawing.loops), drawing.n_curves
         obj.MaxError, obj.Scale = float(drawing.max_error), scale
         sketch = obj.Document.getObject(obj.SketchName) if obj.SketchName else None
         counts = {}
         if sketch is not None:
             counts = fill_sketch(sketch, drawing, scale)
-            sketch.Placement = shape.Placement
+            sketch.Placement = obj.Placement
             if counts["solver"] != 0:
                 raise InputError(f"the sketch solver reports {counts['solver']} on the outline")
         valid = "" if shape.isValid() else "; the faces are NOT valid (curves cross)"
