@@ -54,13 +54,86 @@ def plane_placement(plane: str) -> FreeCAD.Placement:
 
 def drawing_mm(drawing: Drawing, mm_per_px: float) -> list[NDArray[np.float64]]:
     """Every loop's Béziers ``(K, 4, 2)`` in millimetres, y up (loop order of the drawing),
-    without Béziers collapsed to a point (no geometry, and Part rejects them)."""
+    without Béziers collapsed to a point (no geometry, and Part rejects them), untangled at
+    corners (:func:`untangle`)."""
     out = []
     for loop in drawing.loops:
         curves = to_dxf_coords(np.asarray(loop.curves, dtype=float).reshape(-1, 4, 2),
                                drawing.height, mm_per_px)
         spread = np.abs(curves - curves[:, :1]).max(axis=(1, 2), initial=0.0)
-        out.append(curves[spread > 1e-12 * max(drawing.width, drawing.height) * mm_per_px])
+        out.append(untangle(curves[spread > 1e-12 * max(drawing.width, drawing.height) * mm_per_px]))
+    return out
+
+
+# --------------------------------------------------------------------------- untangling
+def _bezier(c: NDArray[np.float64], t: NDArray[np.float64], d: int = 0) -> NDArray[np.float64]:
+    """Points (``d = 0``) or first derivatives (``d = 1``) of the cubic ``c (4, 2)`` at ``t``."""
+    t = np.asarray(t, dtype=float)[..., None]
+    if d == 1:
+        q = 3 * np.diff(c, axis=0)
+        return (1 - t) ** 2 * q[0] + 2 * (1 - t) * t * q[1] + t**2 * q[2]
+    return (1 - t) ** 3 * c[0] + 3 * (1 - t) ** 2 * t * c[1] + 3 * (1 - t) * t**2 * c[2] + t**3 * c[3]
+
+
+def split(c: NDArray[np.float64], t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """De Casteljau: the cubic ``c (4, 2)`` cut at ``t`` into two cubics (exactly)."""
+    a = c[:-1] + t * np.diff(c, axis=0)
+    b = a[:-1] + t * np.diff(a, axis=0)
+    m = b[0] + t * (b[1] - b[0])
+    return np.array([c[0], a[0], b[0], m]), np.array([m, b[1], a[2], c[3]])
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def crossing(a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
+    """Where the cubic ``a`` crosses the cubic ``b`` that starts at its end, nearest that
+    joint along ``a``: parameters ``(u, v)`` with ``a(u) = b(v)``, or None.
+
+    1. Proper crossings of the two sampled polylines (a shared end point does not count).
+    2. The one of largest ``u``, refined by Newton steps on ``a(u) - b(v)``.
+    """
+    t = np.linspace(0.0, 1.0, samples + 1)
+    p, q = _bezier(a, t), _bezier(b, t)
+    r, s = np.diff(p, axis=0)[:, None], np.diff(q, axis=0)[None, :]
+    qp = q[None, :-1] - p[:-1, None]
+    den = _cross(r, s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, y = _cross(qp, s) / den, _cross(qp, r) / den
+    hit = (x > 0) & (x < 1) & (y > 0) & (y < 1) & (np.abs(den) > 0)
+    if not hit.any():
+        return None
+    i, j = np.argwhere(hit)[np.argmax(np.argwhere(hit)[:, 0])]
+    u, v = t[i] + x[i, j] / samples, t[j] + y[i, j] / samples
+    for _ in range(8):
+        f = _bezier(a, u) - _bezier(b, v)
+        jac = np.column_stack([_bezier(a, u, 1), -_bezier(b, v, 1)])
+        if abs(np.linalg.det(jac)) < 1e-300:
+            break
+        du, dv = np.linalg.solve(jac, -f)
+        u, v = float(np.clip(u + du, 0, 1)), float(np.clip(v + dv, 0, 1))
+    return (u, v) if 0 < u < 1 and 0 < v < 1 else None
+
+
+def untangle(curves: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Cut the "fishtail" off corners where two consecutive Béziers cross just before
+    their joint (each overshoots the corner within the fit tolerance, which makes the loop
+    self-intersecting: no valid face, no Pad).
+
+    At each corner joint (not G1) whose two curves cross, both are cut at the crossing
+    (:func:`split`), which becomes the joint; only the tiny loop beyond it is dropped.
+    """
+    out = np.array(curves, dtype=float)
+    smooth = smooth_joints(out) if len(out) > 1 else np.ones(len(out), dtype=bool)
+    for k in np.flatnonzero(~smooth):
+        nxt = (k + 1) % len(out)
+        uv = crossing(out[k], out[nxt])
+        if uv is None:
+            continue
+        out[k] = split(out[k], uv[0])[0]
+        out[nxt] = split(out[nxt], uv[1])[1]
+        out[nxt, 0] = out[k, 3]
     return out
 
 
