@@ -8,8 +8,11 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
-# freecad-python3: FreeCAD 0.20 (headless) for the surface benchmark's peer and the workbench.
-APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1 freecad-python3)
+# freecad-python3: FreeCAD 0.20 (headless) for the surface benchmark's peer and the workbench;
+# freecad + xvfb: its GUI (and the GUI test under a virtual display); python3-scipy,
+# python3-pil, python3-ezdxf: the pde2cad core and its DXF writer inside FreeCAD's Python.
+APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1 freecad-python3 freecad xvfb python3-scipy
+              python3-pil python3-ezdxf)
 PYTHON=${PYTHON:-python3}
 # Debian's own python3 needs python3-venv for `python3 -m venv` (ensurepip).
 "$PYTHON" -c "import venv, ensurepip" 2>/dev/null || APT_PACKAGES+=(python3-venv)
@@ -34,6 +37,17 @@ fi
 echo "setup: installing pde2cad and its dependencies into .venv (first time takes a few minutes)"
 .venv/bin/python -m pip install -q -e ".[all,dev]"
 .venv/bin/python -c "import pde2cad, numpy, scipy, ezdxf, OCP, build123d, cadquery, open3d; print('setup: pde2cad', pde2cad.__version__, 'ready')"
+
+# The FreeCAD workbench: freecad_addon linked into the user's Mod folder; the addon puts this
+# repository's src/ on FreeCAD's sys.path itself, so the core needs no install there.
+mod="$HOME/.local/share/FreeCAD/Mod"
+mkdir -p "$mod"
+if [ -e "$mod/pde2cad" ] && [ ! -L "$mod/pde2cad" ]; then
+  echo "setup: $mod/pde2cad exists and is not our link; leaving it (remove it to link this addon)"
+else
+  ln -sfn "$(pwd)/freecad_addon" "$mod/pde2cad"
+  echo "setup: FreeCAD workbench linked: $mod/pde2cad -> $(pwd)/freecad_addon"
+fi
 
 if [ "${1:-}" = "--install-only" ]; then
   exit 0
