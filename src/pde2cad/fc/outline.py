@@ -87,25 +87,21 @@ def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def crossing(a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
-    """Where the cubic ``a`` crosses the cubic ``b`` that starts at its end, nearest that
-    joint along ``a``: parameters ``(u, v)`` with ``a(u) = b(v)``, or None.
-
-    1. Proper crossings of the two sampled polylines (a shared end point does not count).
-    2. The one of largest ``u``, refined by Newton steps on ``a(u) - b(v)``.
-    """
-    t = np.linspace(0.0, 1.0, samples + 1)
-    p, q = _bezier(a, t), _bezier(b, t)
+def _polyline_hits(p: NDArray[np.float64], q: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Proper crossings of the polylines ``p`` and ``q``: segment pairs ``(i, j)`` (rows of
+    the returned index array) and the fractions along each (shared end points do not count)."""
     r, s = np.diff(p, axis=0)[:, None], np.diff(q, axis=0)[None, :]
     qp = q[None, :-1] - p[:-1, None]
     den = _cross(r, s)
     with np.errstate(divide="ignore", invalid="ignore"):
         x, y = _cross(qp, s) / den, _cross(qp, r) / den
     hit = (x > 0) & (x < 1) & (y > 0) & (y < 1) & (np.abs(den) > 0)
-    if not hit.any():
-        return None
-    i, j = np.argwhere(hit)[np.argmax(np.argwhere(hit)[:, 0])]
-    u, v = t[i] + x[i, j] / samples, t[j] + y[i, j] / samples
+    ij = np.argwhere(hit)
+    return ij, x[hit], y[hit]
+
+
+def _refine(a: NDArray[np.float64], b: NDArray[np.float64], u: float, v: float) -> tuple[float, float] | None:
+    """Newton steps on ``a(u) - b(v) = 0`` from ``(u, v)``; None when it leaves (0, 1)."""
     for _ in range(8):
         f = _bezier(a, u) - _bezier(b, v)
         jac = np.column_stack([_bezier(a, u, 1), -_bezier(b, v, 1)])
@@ -116,15 +112,59 @@ def crossing(a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200)
     return (u, v) if 0 < u < 1 and 0 < v < 1 else None
 
 
+def crossing(a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
+    """Where the cubic ``a`` crosses the cubic ``b`` that starts at its end, nearest that
+    joint along ``a``: parameters ``(u, v)`` with ``a(u) = b(v)``, or None.
+
+    1. Proper crossings of the two sampled polylines (the shared end point does not count).
+    2. The one of largest ``u``, refined by Newton steps on ``a(u) - b(v)``.
+    """
+    t = np.linspace(0.0, 1.0, samples + 1)
+    ij, x, y = _polyline_hits(_bezier(a, t), _bezier(b, t))
+    if not len(ij):
+        return None
+    k = int(np.argmax(ij[:, 0] + x))
+    return _refine(a, b, t[ij[k, 0]] + x[k] / samples, t[ij[k, 1]] + y[k] / samples)
+
+
+def self_crossing(a: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
+    """The parameters ``u1 < u2`` where the cubic ``a`` crosses itself (a loop), or None."""
+    t = np.linspace(0.0, 1.0, samples + 1)
+    p = _bezier(a, t)
+    ij, x, y = _polyline_hits(p, p)
+    keep = ij[:, 1] >= ij[:, 0] + 2
+    if not keep.any():
+        return None
+    (i, j), xi, yj = ij[keep][0], x[keep][0], y[keep][0]
+    return _refine(a, a, t[i] + xi / samples, t[j] + yj / samples)
+
+
+def _cut_loops(curves: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each cubic that loops on itself becomes two, meeting at the crossing (a corner); the
+    loop between them is dropped."""
+    out = []
+    for c in curves:
+        uv = self_crossing(c)
+        if uv is None or not uv[0] < uv[1]:
+            out.append(c)
+            continue
+        head = split(c, uv[0])[0]
+        tail = split(c, uv[1])[1]
+        tail[0] = head[3]
+        out.extend([head, tail])
+    return np.asarray(out, dtype=float).reshape(-1, 4, 2)
+
+
 def untangle(curves: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Cut the "fishtail" off corners where two consecutive Béziers cross just before
-    their joint (each overshoots the corner within the fit tolerance, which makes the loop
+    """Make a loop simple where the fit left sub-tolerance tangles (which make the wire
     self-intersecting: no valid face, no Pad).
 
-    At each corner joint (not G1) whose two curves cross, both are cut at the crossing
-    (:func:`split`), which becomes the joint; only the tiny loop beyond it is dropped.
+    1. A cubic that loops on itself is cut at its crossing into two (:func:`_cut_loops`).
+    2. Where two consecutive Béziers cross just before a corner joint (not G1; both
+       overshoot the corner), both are cut at the crossing (:func:`split`), which becomes
+       the joint; only the tiny "fishtail" beyond it is dropped.
     """
-    out = np.array(curves, dtype=float)
+    out = _cut_loops(np.array(curves, dtype=float))
     smooth = smooth_joints(out) if len(out) > 1 else np.ones(len(out), dtype=bool)
     for k in np.flatnonzero(~smooth):
         nxt = (k + 1) % len(out)
