@@ -115,12 +115,16 @@ def test_surface_feature_matches_api_edits_and_persists(freecad, tmp_path: Path)
     assert file["volume"] == pytest.approx(4 / 3 * np.pi * 37.0**3, rel=5e-3)
     if importlib.util.find_spec("OCP") is not None:
         # The OCP pipeline (another numpy/scipy, another OpenCASCADE) on the same points.
+        from pde2cad.occ.continuity import measure
         from pde2cad.occ.shape import volume
         from pde2cad.reconstruct import reconstruct
 
         rec = reconstruct(pts, labels, continuity="c1")
         assert len(rec.faces) == file["faces"] and rec.sew_info.is_solid
         assert volume(rec.shape) == pytest.approx(file["volume"], rel=1e-6)
+        occ = measure(rec.shape)
+        assert occ["max_angle_deg"] == pytest.approx(file["angle"], abs=1e-3)
+        assert occ["max_gap"] <= 1e-7 * diag
 
     again = freecad("""
         import FreeCAD

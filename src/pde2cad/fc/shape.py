@@ -187,24 +187,43 @@ def _shared_edges(shape: Part.Shape) -> tuple[list[tuple[Any, Any, Any]], int]:
     return shared, free
 
 
-def _face_sample(face: Any, point: Any) -> tuple[Any, Any]:
-    """Closest point of ``face``'s surface to ``point``, and the face's oriented normal there."""
-    u, v = face.Surface.parameter(point)
-    return face.Surface.value(u, v), face.normalAt(u, v)
+def _sampler(face: Any, edge: Any) -> Any:
+    """``sample(t, point) -> (surface point, oriented normal or None)`` of ``face`` along
+    ``edge``: through the edge's pcurve on the face (exact parameters, as in
+    :mod:`pde2cad.occ.continuity`), else by projecting the edge point onto the surface."""
+    try:
+        pcurve = face.curveOnSurface(edge)
+    except Exception:  # noqa: BLE001 - Part raises when the edge has no pcurve on the face
+        pcurve = None
+
+    def sample(t: float, point: Any) -> tuple[Any, Any]:
+        if pcurve:
+            uv = pcurve[0].value(t)
+            u, v = uv.x, uv.y
+        else:
+            u, v = face.Surface.parameter(point)
+        try:
+            normal = face.normalAt(u, v)
+        except Part.OCCError:  # undefined at a collapsed pole
+            normal = None
+        return face.Surface.value(u, v), normal
+
+    return sample
 
 
 def measure_continuity(shape: Part.Shape, samples: int = 20) -> dict[str, Any]:
     """Gap and normal angle across every edge shared by two faces, as FreeCAD evaluates them.
 
     1. Find each edge's two faces (``ancestorsOfType``); count free edges.
-    2. At ``samples`` points along the edge, project onto both surfaces: the distance of the
-       two surface points is the gap, the angle of the two oriented normals the kink.
+    2. At ``samples`` points along the edge, map it into both faces (pcurves, see
+       :func:`_sampler`): the distance of the two surface points is the gap, the angle of
+       the two oriented normals the kink.
 
     Returns
     -------
     dict
-        ``{"max_gap", "max_angle_deg", "shared_edges", "free_edges"}``; the angle is NaN
-        where a normal is undefined (a collapsed pole), and skipped in the maximum.
+        ``{"max_gap", "max_angle_deg", "shared_edges", "free_edges"}``; samples where a
+        normal is undefined (a collapsed pole) count for the gap only.
     """
     if samples < 2:
         raise InputError(f"samples must be at least 2, got {samples}")
@@ -212,14 +231,14 @@ def measure_continuity(shape: Part.Shape, samples: int = 20) -> dict[str, Any]:
     max_gap = max_angle = 0.0
     for edge, fa, fb in shared:
         first, last = edge.ParameterRange
+        sample_a, sample_b = _sampler(fa, edge), _sampler(fb, edge)
         for t in np.linspace(first, last, samples):
             point = edge.valueAt(float(t))
-            pa, na = _face_sample(fa, point)
-            pb, nb = _face_sample(fb, point)
+            pa, na = sample_a(float(t), point)
+            pb, nb = sample_b(float(t), point)
             max_gap = max(max_gap, (pa - pb).Length)
-            angle = math.degrees(math.atan2(na.cross(nb).Length, na.dot(nb)))
-            if math.isfinite(angle):
-                max_angle = max(max_angle, angle)
+            if na is not None and nb is not None:
+                max_angle = max(max_angle, math.degrees(math.atan2(na.cross(nb).Length, na.dot(nb))))
     return {
         "max_gap": float(max_gap), "max_angle_deg": float(max_angle),
         "shared_edges": len(shared), "free_edges": free,
