@@ -222,3 +222,41 @@ def test_untangle_cuts_fishtails_and_self_loops(freecad) -> None:  # noqa: ANN00
         assert not before and after, name
         assert gap == 0.0  # joints exact
     assert out["res"]["fish"][3] == 4 and out["res"]["loop"][3] == 3
+
+
+def test_outline_persists(freecad, tmp_path: Path) -> None:  # noqa: ANN001
+    """Saved and reopened in a fresh process, the outline feature and its sketch keep their
+    geometry, and a recompute (with an edited tolerance and back) gives it again."""
+    image = _drawn_part(tmp_path / "plate.png")
+    doc_path = tmp_path / "outline.FCStd"
+    first = freecad("""
+        import FreeCAD
+        from freecad.pde2cad import api
+        doc = FreeCAD.newDocument("keep")
+        o = api.make_outline(doc, ARGS["image"], dpi=100, plane="YZ")
+        sk = doc.getObject(o.SketchName)
+        out["r"] = [o.Shape.Area, len(o.Shape.Edges), len(sk.Geometry), sk.Shape.Length]
+        doc.saveAs(ARGS["doc"])
+    """, image=str(image), doc=str(doc_path))
+    again = freecad("""
+        import FreeCAD
+        doc = FreeCAD.openDocument(ARGS["doc"])
+        o = doc.getObject("Outline")
+        sk = doc.getObject(o.SketchName)
+        out["restored"] = [o.Shape.Area, len(o.Shape.Edges), len(sk.Geometry), sk.Shape.Length]
+        o.Tolerance = 3.0
+        doc.recompute()
+        out["coarse"] = len(sk.Geometry)
+        o.Tolerance = 1.0
+        doc.recompute()
+        doc.recompute()
+        out["recomputed"] = [o.Shape.Area, len(o.Shape.Edges), len(sk.Geometry), sk.Shape.Length,
+                             o.isValid(), sk.isValid(), o.Shape.BoundBox.XLength]
+    """, doc=str(doc_path))
+    area, edges, pieces, length = first["r"]
+    for got in (again["restored"], again["recomputed"][:4]):
+        assert got[1:3] == [edges, pieces]
+        assert got[0] == pytest.approx(area, rel=1e-9) and got[3] == pytest.approx(length, rel=1e-9)
+    assert again["coarse"] < pieces  # the edit recomputed (fewer curves at 3 px)
+    assert again["recomputed"][4:6] == [True, True]
+    assert again["recomputed"][6] == pytest.approx(0.0, abs=1e-9)  # on the YZ plane
