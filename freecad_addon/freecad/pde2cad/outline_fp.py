@@ -118,6 +118,9 @@ class OutlineFeature(Feature):
             if counts["solver"] != 0:
                 raise InputError(f"the sketch solver reports {counts['solver']} on the outline")
         valid = "" if shape.isValid() else "; the faces are NOT valid (curves cross)"
+        if len(shape.Faces) > 1:
+            valid += (f"; {len(shape.Faces)} separate shapes: Part Extrude them (a PartDesign "
+                      "Pad makes one solid per body)")
         obj.Status = (
             f"{len(drawing.loops)} loops, {drawing.n_curves} curves, max error "
             f"{drawing.max_error:.3g} px, {scale:.4g} mm/px, {len(shape.Faces)} faces"
@@ -125,7 +128,7 @@ class OutlineFeature(Feature):
                f"B-splines, {counts['coincident']} coincident, {counts['tangent']} tangent"
                if sketch is not None else "") + valid
         )
-        report = FreeCAD.Console.PrintWarning if valid else FreeCAD.Console.PrintMessage
+        report = FreeCAD.Console.PrintWarning if not shape.isValid() else FreeCAD.Console.PrintMessage
         report(f"pde2cad {obj.Label}: {obj.Status}\n")
         return shape
 
