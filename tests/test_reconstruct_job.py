@@ -190,3 +190,31 @@ def test_job_result_matches_the_files(cloud: Path) -> None:
     assert s["max_gap"] <= 1e-7 * result.reconstruction.diagonal
     assert result.timings["total"] >= result.timings["reconstruct"] > 0
     assert set(result.outputs) == {"output", "report"}
+
+
+def test_cli_header_flags_reach_the_job(cloud: Path, monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """The CLI only parses: its --name/--author/--organization become the job's fields
+    (dropped before the run itself while the writers lack those keywords)."""
+    from dataclasses import replace
+
+    import pde2cad.reconstruct_job as job_module
+
+    jobs: list[ReconstructJob] = []
+    real = job_module.run_reconstruct
+
+    def spy(job: ReconstructJob, **kwargs: Any) -> Any:
+        jobs.append(job)
+        return real(replace(job, name=None, author=None, organization=None), **kwargs)
+
+    monkeypatch.setattr(job_module, "run_reconstruct", spy)
+    folder = cloud.parent
+    assert main(["reconstruct", str(cloud), "--labels", str(folder / "labels.txt"), "-o",
+                 str(folder / "o.step"), "--name", "bracket-7", "--author", "A. Smith",
+                 "--organization", "Works Ltd", "--continuity", "c1", "--terms", "5"]) == 0
+    (job,) = jobs
+    assert (job.name, job.author, job.organization) == ("bracket-7", "A. Smith", "Works Ltd")
+    assert (job.continuity, job.terms, Path(job.output)) == ("c1", 5, folder / "o.step")
+    out = capsys.readouterr().out
+    assert "4 faces" in out and str(folder / "o.step") in out
+    assert measure(read_step(folder / "o.step"))["n_faces"] == 4
