@@ -82,3 +82,21 @@ def test_float_labels_that_are_whole_numbers_are_taken() -> None:
     cloud = samples.sheet(6000, seed=1)
     model = fit_surfaces(cloud.points, cloud.labels.astype(float) + 10.0)
     assert model.labels == [10, 11, 12, 13]
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"m": None, "n": None}, 'm must be a whole number >= 1 or "auto", got None'),
+        ({"m": 2.5, "n": 2.5}, "got 2.5"),
+        ({"m": 4, "n": True}, "n must be"),
+        ({"continuity": None}, "continuity must be 'c0' or 'c1'"),
+        ({"tolerance": "0.1"}, "tolerance must be a positive number, got '0.1'"),
+        ({"cad_tolerance": float("nan")}, "cad_tolerance must be a positive number"),
+    ],
+)
+def test_wrong_options_are_input_errors(options: dict[str, object], message: str) -> None:
+    cloud = samples.sheet(2000, seed=1)
+    with pytest.raises(InputError) as info:
+        fit_surfaces(cloud.points, cloud.labels, **options)  # type: ignore[arg-type]
+    assert message in str(info.value)

@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import TYPE_CHECKING, Any, Literal, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,6 +42,10 @@ from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
+
+if TYPE_CHECKING:
+    import build123d
+    import cadquery
 
 #: Default CAD (deformation -> B-spline) tolerance, relative to the cloud's bbox diagonal.
 CAD_TOLERANCE = 1e-4
@@ -168,13 +172,13 @@ class Reconstruction:
 
         return write_iges(self.shape, path, units=units, **options)
 
-    def to_build123d(self) -> Any:
+    def to_build123d(self) -> build123d.Shape:
         """The shape as a build123d ``Solid`` (closed) or ``Shell`` (open)."""
         from pde2cad.occ import to_build123d
 
         return to_build123d(self.shape)
 
-    def to_cadquery(self) -> Any:
+    def to_cadquery(self) -> cadquery.Shape:
         """The shape as a CadQuery ``Solid`` (closed) or ``Shell`` (open)."""
         from pde2cad.occ import to_cadquery
 
@@ -256,7 +260,12 @@ def check_cloud(points: ArrayLike, labels: ArrayLike) -> tuple[NDArray[np.float6
     return pts, as_labels(lab, len(pts), "the labels argument")
 
 
-def _check_options(continuity: str, tolerance: float | None, cad_tolerance: float | None) -> None:
+def _check_options(m: object, n: object, continuity: str, tolerance: float | None,
+                   cad_tolerance: float | None) -> None:
+    for name, terms in (("m", m), ("n", n)):
+        if terms != "auto" and (isinstance(terms, bool)
+                                or not isinstance(terms, (int, np.integer)) or terms < 1):
+            raise InputError(f'{name} must be a whole number >= 1 or "auto", got {terms!r}')
     for name, value in (("tolerance", tolerance), ("cad_tolerance", cad_tolerance)):
         if value is None:
             continue
@@ -412,7 +421,7 @@ def fit_surfaces(
     SurfaceModel
     """
     world, lab = check_cloud(points, labels)
-    _check_options(continuity, tolerance, cad_tolerance)
+    _check_options(m, n, continuity, tolerance, cad_tolerance)
     frame = Frame.of(world)
     pts = frame.to_local(world)
     timings: dict[str, float] = {}
@@ -431,12 +440,14 @@ def fit_surfaces(
         label: frame.surface(patch_to_bspline(p.base, p.deformation, cad_tol))
         for label, p in patches.items()
     }
-    timings["bspline"] = time.perf_counter() - t0
     world_net = frame.network(network)
+    world_patches: dict[int, Patch] = {
+        label: frame.patch(p, world[lab == label]) for label, p in patches.items()
+    }
+    timings["bspline"] = time.perf_counter() - t0
     return SurfaceModel(
-        surfaces=surfaces, labels=sorted(patches),
-        patches={label: frame.patch(p, world[lab == label]) for label, p in patches.items()},
-        network=world_net, layout=layout, edges=world_net.curves,
+        surfaces=surfaces, labels=sorted(patches), patches=world_patches, network=world_net,
+        layout=layout, edges=world_net.curves,
         edge_errors=world_net.errors, corners=world_net.corners, diagonal=frame.scale,
         c0_fallback=fallback, timings=timings, frame=frame,
     )
