@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
@@ -100,3 +101,30 @@ def test_wrong_options_are_input_errors(options: dict[str, object], message: str
     with pytest.raises(InputError) as info:
         fit_surfaces(cloud.points, cloud.labels, **options)  # type: ignore[arg-type]
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "make, continuity",
+    [(lambda: samples.teapot(20000, parts=("body", "bottom")), "c1"),
+     (lambda: samples.sphere6(20000), "c1"), (lambda: samples.torus(20000), "c0")],
+)
+def test_patches_mapped_back_evaluate_like_the_fitted_ones(make: Any, continuity: str) -> None:
+    """Each patch handed back (bilinear or bicubic base, 3- or 4-sided) is the fitted patch
+    moved to the caller's frame: the same points at the same parameters, errors scaled."""
+    cloud = make()
+    shift = np.array([2e5, -1e5, 3e4])
+    model = fit_surfaces(cloud.points * 50.0 + shift, cloud.labels, continuity=continuity)
+    frame = model.frame
+    assert frame is not None and frame.scale == pytest.approx(50.0 * cloud.diagonal)
+    u, v = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9)))
+    for label, patch in model.patches.items():
+        local = patch.local
+        world = frame.point(local.evaluate(u, v))
+        np.testing.assert_allclose(patch.evaluate(u, v), world, rtol=0, atol=1e-9 * frame.scale)
+        surface = model.surfaces[label]
+        on_surface = np.asarray(surface.evaluate(u, v))
+        # The B-spline is within the CAD tolerance (1e-4 D) of the patch it came from.
+        assert np.abs(on_surface - world).max() <= 2e-4 * frame.scale
+        assert patch.fit_errors["max"] == pytest.approx(local.fit_errors["max"] * frame.scale)
+        np.testing.assert_array_equal(patch.points, cloud.points[cloud.labels == label] * 50.0
+                                      + shift)
