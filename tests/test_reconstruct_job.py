@@ -218,3 +218,21 @@ def test_cli_header_flags_reach_the_job(cloud: Path, monkeypatch: pytest.MonkeyP
     out = capsys.readouterr().out
     assert "4 faces" in out and str(folder / "o.step") in out
     assert measure(read_step(folder / "o.step"))["n_faces"] == 4
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (Linux)")
+def test_a_full_stdout_is_exit_3_not_a_traceback(cloud: Path) -> None:
+    import subprocess
+    import sys
+
+    folder = cloud.parent
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run(
+            [sys.executable, "-m", "pde2cad.cli", "reconstruct", str(cloud), "--labels",
+             str(folder / "labels.txt"), "-o", str(folder / "o.step")],
+            stdout=full, stderr=subprocess.PIPE, text=True,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")},
+        )
+    assert proc.returncode == 3, proc.stderr
+    assert "summary could not be printed" in proc.stderr and "Traceback" not in proc.stderr
+    assert measure(read_step(folder / "o.step"))["n_faces"] == 4

@@ -240,10 +240,14 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         print(f"pde2cad reconstruct: warning: OpenCASCADE reports the shape in {outputs['output']} "
               "as invalid; check it before use", file=sys.stderr)
     if not args.quiet:
-        print(f"reconstruct: {args.cloud} -> {', '.join(map(str, outputs.values()))}")
-        for line in _summary(report):
-            print(f"  {line}")
-        print(f"  time {result.timings['total']:.1f} s")
+        lines = [f"reconstruct: {args.cloud} -> {', '.join(map(str, outputs.values()))}",
+                 *(f"  {line}" for line in _summary(report)),
+                 f"  time {result.timings['total']:.1f} s"]
+        try:
+            print("\n".join(lines), flush=True)
+        except OSError as exc:  # a full disk or a closed pipe behind stdout
+            raise ExportError(f"the outputs were written, but the summary could not be "
+                              f"printed ({exc.strerror or exc})") from exc
     return EXIT_OK
 
 
