@@ -128,3 +128,16 @@ def test_patches_mapped_back_evaluate_like_the_fitted_ones(make: Any, continuity
         assert patch.fit_errors["max"] == pytest.approx(local.fit_errors["max"] * frame.scale)
         np.testing.assert_array_equal(patch.points, cloud.points[cloud.labels == label] * 50.0
                                       + shift)
+
+
+def test_layout_is_handed_back_in_the_callers_units() -> None:
+    cloud = samples.sheet(6000, seed=1)
+    model = fit_surfaces(cloud.points * 1e3 + 5e5, cloud.labels)
+    lay = model.layout
+    assert lay.tree is None
+    for border in lay.borders.values():  # border points lie on the moved sheet
+        assert np.abs(cloud.distance((border - 5e5) / 1e3)).max() <= 2e-2 * cloud.diagonal
+    assert np.abs(cloud.distance((lay.corners - 5e5) / 1e3)).max() <= 2e-2 * cloud.diagonal
+    # Point spacing of 6000 points over a 2 x 2 sheet (x 1e3): about 2000 / sqrt(6000).
+    assert 0.2 * 2e3 / np.sqrt(6000) < lay.spacing < 5 * 2e3 / np.sqrt(6000)
+    assert lay.radius > lay.spacing

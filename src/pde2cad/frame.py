@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from pde2cad.bspline.data import BSplineSurface
 from pde2cad.errors import InputError
+from pde2cad.layout import Layout
 from pde2cad.layout.edges import EdgeNetwork
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons, Ribbons
@@ -88,6 +89,17 @@ class Frame:
             curves={k: self.curve(c) for k, c in net.curves.items()},
             errors=self.lengths(net.errors),
             rms=self.lengths(net.rms),
+        )
+
+    def layout(self, lay: Layout) -> Layout:
+        """Borders, corners and spacings in world units; the KD-tree (of the working-frame
+        points) is dropped."""
+        return dataclasses.replace(
+            lay,
+            borders={k: self.point(b) for k, b in lay.borders.items()},
+            corners=self.point(lay.corners),
+            open_boundary={k: self.point(b) for k, b in lay.open_boundary.items()},
+            spacing=lay.spacing * self.scale, radius=lay.radius * self.scale, tree=None,
         )
 
     def ribbons(self, r: Ribbons | None) -> Ribbons | None:

@@ -86,7 +86,7 @@ class SurfaceModel:
     network : EdgeNetwork
         Corners, side loops, edge curves and their fit errors.
     layout : Layout
-        Adjacency and borders, in the working frame (``frame``).
+        Adjacency, borders and rough corners (without its KD-tree).
     edges : dict[(int, int), PiecewiseBezier]
         The shared curve of each edge, keyed by sorted global corner ids, running from the
         smaller id to the larger (``network.curves``).
@@ -447,7 +447,7 @@ def fit_surfaces(
     timings["bspline"] = time.perf_counter() - t0
     return SurfaceModel(
         surfaces=surfaces, labels=sorted(patches), patches=world_patches, network=world_net,
-        layout=layout, edges=world_net.curves,
+        layout=frame.layout(layout), edges=world_net.curves,
         edge_errors=world_net.errors, corners=world_net.corners, diagonal=frame.scale,
         c0_fallback=fallback, timings=timings, frame=frame,
     )
