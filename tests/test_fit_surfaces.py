@@ -141,3 +141,16 @@ def test_layout_is_handed_back_in_the_callers_units() -> None:
     # Point spacing of 6000 points over a 2 x 2 sheet (x 1e3): about 2000 / sqrt(6000).
     assert 0.2 * 2e3 / np.sqrt(6000) < lay.spacing < 5 * 2e3 / np.sqrt(6000)
     assert lay.radius > lay.spacing
+
+
+def test_an_unreachable_tolerance_says_which_units_its_figures_are_in() -> None:
+    from pde2cad.errors import FitError
+
+    cloud = samples.sheet(4000, noise=0.01)
+    with pytest.raises(FitError) as info:
+        fit_surfaces(cloud.points * 10.0, cloud.labels, tolerance=1e-4)
+    text = str(info.value)
+    diagonal = 10.0 * float(np.linalg.norm(np.ptp(cloud.points, axis=0)))
+    assert "not reached" in text and f"diagonal, {diagonal:.6g} in its units" in text
+    # 1e-4 model units is 1e-4 / diagonal of the working frame's unit diagonal
+    assert f"tolerance {1e-4 / diagonal:.3g}" in text

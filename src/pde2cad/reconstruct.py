@@ -428,9 +428,14 @@ def fit_surfaces(
     layout, network = _build_network(pts, lab, continuity, timings, progress)
 
     t0 = time.perf_counter()
-    patches, fallback = _fit_patches(
-        pts, lab, network, m, n, continuity, frame.length_to_local(tolerance), progress
-    )
+    try:
+        patches, fallback = _fit_patches(
+            pts, lab, network, m, n, continuity, frame.length_to_local(tolerance), progress
+        )
+    except FitError as exc:
+        # The fit ran in the working frame: its figures are fractions of the diagonal.
+        raise FitError(f"{exc} (lengths in this message are fractions of the cloud's "
+                       f"bounding-box diagonal, {frame.scale:.6g} in its units)") from exc
     timings["patches"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
