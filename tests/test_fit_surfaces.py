@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
@@ -82,3 +83,74 @@ def test_float_labels_that_are_whole_numbers_are_taken() -> None:
     cloud = samples.sheet(6000, seed=1)
     model = fit_surfaces(cloud.points, cloud.labels.astype(float) + 10.0)
     assert model.labels == [10, 11, 12, 13]
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"m": None, "n": None}, 'm must be a whole number >= 1 or "auto", got None'),
+        ({"m": 2.5, "n": 2.5}, "got 2.5"),
+        ({"m": 4, "n": True}, "n must be"),
+        ({"continuity": None}, "continuity must be 'c0' or 'c1'"),
+        ({"tolerance": "0.1"}, "tolerance must be a positive number, got '0.1'"),
+        ({"cad_tolerance": float("nan")}, "cad_tolerance must be a positive number"),
+    ],
+)
+def test_wrong_options_are_input_errors(options: dict[str, object], message: str) -> None:
+    cloud = samples.sheet(2000, seed=1)
+    with pytest.raises(InputError) as info:
+        fit_surfaces(cloud.points, cloud.labels, **options)  # type: ignore[arg-type]
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "make, continuity",
+    [(lambda: samples.teapot(20000, parts=("body", "bottom")), "c1"),
+     (lambda: samples.sphere6(20000), "c1"), (lambda: samples.torus(20000), "c0")],
+)
+def test_patches_mapped_back_evaluate_like_the_fitted_ones(make: Any, continuity: str) -> None:
+    """Each patch handed back (bilinear or bicubic base, 3- or 4-sided) is the fitted patch
+    moved to the caller's frame: the same points at the same parameters, errors scaled."""
+    cloud = make()
+    shift = np.array([2e5, -1e5, 3e4])
+    model = fit_surfaces(cloud.points * 50.0 + shift, cloud.labels, continuity=continuity)
+    frame = model.frame
+    assert frame is not None and frame.scale == pytest.approx(50.0 * cloud.diagonal)
+    u, v = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9)))
+    for label, patch in model.patches.items():
+        local = patch.local
+        world = frame.point(local.evaluate(u, v))
+        np.testing.assert_allclose(patch.evaluate(u, v), world, rtol=0, atol=1e-9 * frame.scale)
+        surface = model.surfaces[label]
+        on_surface = np.asarray(surface.evaluate(u, v))
+        # The B-spline is within the CAD tolerance (1e-4 D) of the patch it came from.
+        assert np.abs(on_surface - world).max() <= 2e-4 * frame.scale
+        assert patch.fit_errors["max"] == pytest.approx(local.fit_errors["max"] * frame.scale)
+        np.testing.assert_array_equal(patch.points, cloud.points[cloud.labels == label] * 50.0
+                                      + shift)
+
+
+def test_layout_is_handed_back_in_the_callers_units() -> None:
+    cloud = samples.sheet(6000, seed=1)
+    model = fit_surfaces(cloud.points * 1e3 + 5e5, cloud.labels)
+    lay = model.layout
+    assert lay.tree is None
+    for border in lay.borders.values():  # border points lie on the moved sheet
+        assert np.abs(cloud.distance((border - 5e5) / 1e3)).max() <= 2e-2 * cloud.diagonal
+    assert np.abs(cloud.distance((lay.corners - 5e5) / 1e3)).max() <= 2e-2 * cloud.diagonal
+    # Point spacing of 6000 points over a 2 x 2 sheet (x 1e3): about 2000 / sqrt(6000).
+    assert 0.2 * 2e3 / np.sqrt(6000) < lay.spacing < 5 * 2e3 / np.sqrt(6000)
+    assert lay.radius > lay.spacing
+
+
+def test_an_unreachable_tolerance_says_which_units_its_figures_are_in() -> None:
+    from pde2cad.errors import FitError
+
+    cloud = samples.sheet(4000, noise=0.01)
+    with pytest.raises(FitError) as info:
+        fit_surfaces(cloud.points * 10.0, cloud.labels, tolerance=1e-4)
+    text = str(info.value)
+    diagonal = 10.0 * float(np.linalg.norm(np.ptp(cloud.points, axis=0)))
+    assert "not reached" in text and f"diagonal, {diagonal:.6g} in its units" in text
+    # 1e-4 model units is 1e-4 / diagonal of the working frame's unit diagonal
+    assert f"tolerance {1e-4 / diagonal:.3g}" in text

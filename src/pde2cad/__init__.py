@@ -3,6 +3,16 @@
 Binary images become outlines of cubic Béziers (SVG, DXF); point clouds become PDE surface
 patches (STEP, IGES). ``import pde2cad`` stays light: heavy libraries (OCP, open3d, ezdxf,
 matplotlib) are imported only by the functions that use them.
+
+A labelled cloud to a build123d solid, and to STEP::
+
+    import pde2cad
+    rec = pde2cad.reconstruct(points, labels, continuity="c1")  # sewn OCP shape
+    solid = rec.to_build123d()          # build123d Solid (closed) or Shell (open)
+    rec.write_step("part.step")
+
+Without a CAD kernel (e.g. inside FreeCAD's Python), ``pde2cad.fit_surfaces(points, labels)``
+gives the kernel-neutral B-spline surfaces (a :class:`~pde2cad.reconstruct.SurfaceModel`).
 """
 
 from __future__ import annotations

@@ -106,18 +106,6 @@ def _run_vectorize(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- reconstruct
-#: Output suffixes per option of ``reconstruct`` (checked before any work is done).
-_RECONSTRUCT_SUFFIXES = {
-    "output": (".step", ".stp"),
-    "iges": (".igs", ".iges"),
-    "report": (".json",),
-    "preview": (".png", ".svg", ".pdf"),
-}
-#: PLY vertex properties tried, in order, when ``--labels`` is not given.
-_LABEL_PROPERTIES = (
-    "label", "labels", "scalar_label", "scalar_Label", "scalar_labels", "scalar_Labels",
-    "segment", "segment_id", "scalar_segment", "scalar_Segment", "class", "scalar_class",
-)  # fmt: skip
 #: Deformation terms above this are far beyond anything a patch needs (and slow).
 _MAX_TERMS = 40
 
@@ -176,76 +164,11 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--freecad-check", action="store_true",
                    help="also read the STEP with FreeCAD 0.20 (its own process) and report its "
                    "validity, solids, free edges, gaps and normal angles")
+    p.add_argument("--name", help="product name in the STEP/IGES files (default: the writer's)")
+    p.add_argument("--author", help="author recorded in the STEP/IGES header")
+    p.add_argument("--organization", help="organization recorded in the STEP/IGES header")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary")
     p.set_defaults(run=_run_reconstruct)
-
-
-def _check_outputs(args: argparse.Namespace) -> dict[str, Path]:
-    """Requested outputs by option, checked before any work: suffix, distinct, folder."""
-    import os
-
-    outputs = {key: Path(getattr(args, key)) for key in _RECONSTRUCT_SUFFIXES if getattr(args, key)}
-    for key, path in outputs.items():
-        allowed = _RECONSTRUCT_SUFFIXES[key]
-        if path.suffix.lower() not in allowed:
-            flag = "-o" if key == "output" else f"--{key}"
-            raise InputError(f"{flag} {path} must end in {' or '.join(allowed)}")
-    resolved = [p.resolve() for p in outputs.values()]
-    if Path(args.cloud).resolve() in resolved:
-        raise InputError(f"an output would overwrite the input cloud {args.cloud}; pick another name")
-    if len(set(resolved)) != len(resolved):
-        raise InputError("two outputs name the same file; give each output its own name")
-    for path in outputs.values():
-        parent = path.parent if str(path.parent) else Path(".")
-        if not parent.is_dir():
-            raise ExportError(f"cannot write {path}: folder {parent} does not exist; create it first")
-        if not os.access(parent, os.W_OK | os.X_OK):
-            raise ExportError(f"cannot write {path}: folder {parent} is not writable; pick another")
-    return outputs
-
-
-def _label_property(path: Path) -> str:
-    """The label property of a PLY cloud when ``--labels`` is not given."""
-    from pde2cad.io.clouds import _ply_header
-
-    _, elements, _ = _ply_header(path)
-    props = [name for e in elements if e[0] == "vertex" for name, kind in e[2] if kind != "list"]
-    for name in _LABEL_PROPERTIES:
-        if name in props:
-            return name
-    for name in props:
-        if "label" in name.lower() or "segment" in name.lower():
-            return name
-    scalars = [name for name in props if name.startswith("scalar_")]
-    if len(scalars) == 1:  # CloudCompare names every scalar field scalar_<name>
-        return scalars[0]
-    raise InputError(
-        f"{path} has no label property (vertex properties: {', '.join(props) or 'none'}); "
-        "name it with --labels NAME or pass a label file with --labels FILE.npy"
-    )
-
-
-def _read_labelled(args: argparse.Namespace) -> tuple[Any, Any, str]:
-    """Points, labels and where the labels came from."""
-    from pde2cad.io.clouds import read_cloud
-
-    path = Path(args.cloud)
-    if not path.is_file():
-        raise InputError(f"point cloud file {path} does not exist; check the path")
-    if path.stat().st_size == 0:
-        raise InputError(f"point cloud file {path} is empty; check the file")
-    source = args.labels
-    if source is None:
-        if path.suffix.lower() != ".ply":
-            raise InputError(
-                f"{path} carries no labels by itself: pass --labels column4 (the 4th column of "
-                "a .npy or text cloud) or --labels FILE (a .npy/.txt file, one label per point)"
-            )
-        source = _label_property(path)
-    points, labels = read_cloud(path, labels=source)
-    if labels is None:  # read_cloud returns labels whenever a source is named
-        raise InputError(f"no labels could be read from {source}; check --labels")
-    return points, labels, str(source)
 
 
 class _Progress:
@@ -306,162 +229,25 @@ class _Progress:
         self.stage = None
 
 
-class _Staging:
-    """Outputs written to temporary files beside their targets and renamed together at the
-    end: a failure anywhere (a later output, the read-back check) leaves no output of this
-    run behind."""
-
-    def __init__(self) -> None:
-        self.pending: dict[Path, Path] = {}
-
-    def path(self, target: Path) -> Path:
-        import os
-        import tempfile
-
-        parent = target.parent if str(target.parent) else Path(".")
-        try:
-            fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=parent)
-        except OSError as exc:
-            raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
-        os.close(fd)
-        self.pending[target] = Path(name)
-        return Path(name)
-
-    def commit(self) -> None:
-        import os
-
-        # mkstemp creates 0600 files; give the outputs the usual permissions (umask applied).
-        umask = os.umask(0o022)
-        os.umask(umask)
-        done: list[Path] = []
-        try:
-            for target, tmp in self.pending.items():
-                os.chmod(tmp, 0o666 & ~umask)
-                os.replace(tmp, target)
-                done.append(target)
-        except OSError as exc:
-            for target in done:  # this run's outputs only; never anything older
-                target.unlink(missing_ok=True)
-            raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
-        finally:
-            self.discard()
-
-    def discard(self) -> None:
-        for tmp in self.pending.values():
-            tmp.unlink(missing_ok=True)
-        self.pending.clear()
-
-
-def _quiet_occt() -> Callable[[], None]:
-    """Silence OCCT's transfer statistics (printed on stdout); returns the undo."""
-    try:
-        from OCP.Message import Message, Message_Gravity
-    except ImportError:
-        return lambda: None
-    printers = list(Message.DefaultMessenger_s().Printers())
-    levels = [p.GetTraceLevel() for p in printers]
-    for p in printers:
-        p.SetTraceLevel(Message_Gravity.Message_Fail)
-
-    def undo() -> None:
-        for p, level in zip(printers, levels, strict=True):
-            p.SetTraceLevel(level)
-
-    return undo
-
-
-def _reconstruct_kwargs(reconstruct: Callable[..., Any], args: argparse.Namespace,
-                        progress: Callable[[str, int, int], None]) -> dict[str, Any]:
-    """Keyword arguments for ``reconstruct``: options left at their default are not passed,
-    so the command works with versions of ``reconstruct`` that lack them."""
-    import inspect
-
-    params = inspect.signature(reconstruct).parameters
-    takes_all = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
-
-    def accepts(name: str) -> bool:
-        return takes_all or name in params
-
-    kwargs: dict[str, Any] = {"m": args.terms, "n": args.terms}
-    if args.continuity != "c0":
-        if not accepts("continuity"):
-            raise InputError(
-                f"--continuity {args.continuity} is not supported by this version of pde2cad; "
-                "use --continuity c0"
-            )
-        kwargs["continuity"] = args.continuity
-    if args.tolerance is not None:
-        kwargs["tolerance"] = args.tolerance
-    if args.cad_tolerance is not None:
-        kwargs["cad_tolerance"] = args.cad_tolerance
-    if accepts("progress"):
-        kwargs["progress"] = progress
-    return kwargs
-
-
 def _run_reconstruct(args: argparse.Namespace) -> int:
-    import importlib.util
-    import time
+    from pde2cad.reconstruct_job import ReconstructJob, run_reconstruct
 
-    start = time.perf_counter()
-    outputs = _check_outputs(args)
-    if importlib.util.find_spec("OCP") is None:
-        raise Pde2CadError("reconstruct needs OCP (OpenCASCADE); install it with: "
-                           "pip install 'pde2cad[cad]'")
-    if args.preview and importlib.util.find_spec("matplotlib") is None:
-        raise InputError("--preview needs matplotlib; install it with: pip install "
-                         "'pde2cad[plots]', or leave out --preview")
     progress = _Progress(args.quiet)
-    timings: dict[str, float] = {}
-
-    t0 = time.perf_counter()
-    points, labels, source = _read_labelled(args)
-    n_read = len(points)
-    if args.outliers or args.voxel:
-        from pde2cad.io.clouds import preprocess
-
-        points, labels = preprocess(points, labels, outlier_nb=20 if args.outliers else None,
-                                    voxel=args.voxel)
-    timings["read"] = time.perf_counter() - t0
-    n_segments = len(set(labels.tolist()))
-    progress.message(f"read {n_read} points ({len(points)} used), {n_segments} segments "
-                     f"(labels from {source})")
-
-    from pde2cad.reconstruct import reconstruct
-
-    undo = _quiet_occt()
-    staging = _Staging()
-    try:
-        t0 = time.perf_counter()
-        kwargs = _reconstruct_kwargs(reconstruct, args, progress)
-        try:
-            rec = reconstruct(points, labels, **kwargs)
-        except (Pde2CadError, MemoryError, KeyboardInterrupt):
-            raise
-        except Exception as exc:  # noqa: BLE001 - a numeric or OCCT failure is still a message
-            raise Pde2CadError(
-                f"reconstruction failed ({type(exc).__name__}: {exc}); check that every "
-                "segment is one connected 3- or 4-sided region"
-            ) from exc
-        timings["reconstruct"] = time.perf_counter() - t0
-        report = _write_outputs(args, rec, outputs, staging, progress, timings, source, n_read,
-                                len(points))
-        timings["total"] = time.perf_counter() - start
-        report["timings"].update(timings)
-        if "report" in outputs:
-            _write_json(staging, outputs["report"], report)
-        staging.commit()
-    finally:
-        staging.discard()
-        undo()
+    result = run_reconstruct(ReconstructJob.from_options(args), progress=progress,
+                             message=progress.message)
+    report, outputs = result.report, result.outputs
     if not report["summary"]["valid"]:
         print(f"pde2cad reconstruct: warning: OpenCASCADE reports the shape in {outputs['output']} "
               "as invalid; check it before use", file=sys.stderr)
     if not args.quiet:
-        print(f"reconstruct: {args.cloud} -> {', '.join(map(str, outputs.values()))}")
-        for line in _summary(report):
-            print(f"  {line}")
-        print(f"  time {timings['total']:.1f} s")
+        lines = [f"reconstruct: {args.cloud} -> {', '.join(map(str, outputs.values()))}",
+                 *(f"  {line}" for line in _summary(report)),
+                 f"  time {result.timings['total']:.1f} s"]
+        try:
+            print("\n".join(lines), flush=True)
+        except OSError as exc:  # a full disk or a closed pipe behind stdout
+            raise ExportError(f"the outputs were written, but the summary could not be "
+                              f"printed ({exc.strerror or exc})") from exc
     return EXIT_OK
 
 
@@ -480,69 +266,6 @@ def _summary(report: dict[str, Any]) -> list[str]:
             f"{fc['max_angle_deg']:.3g} deg"
         )
     return lines
-
-
-def _write_json(staging: _Staging, target: Path, report: dict[str, Any]) -> None:
-    from pde2cad.report import json_safe
-
-    tmp = staging.path(target)
-    try:
-        tmp.write_text(json.dumps(json_safe(report), indent=2, allow_nan=False))
-    except OSError as exc:
-        raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
-
-
-def _write_outputs(args: argparse.Namespace, rec: Any, outputs: dict[str, Path],
-                   staging: _Staging, progress: _Progress, timings: dict[str, float],
-                   source: str, n_read: int, n_used: int) -> dict[str, Any]:
-    """STEP, IGES and preview to staging files, and the report from the staged STEP."""
-    import time
-
-    from pde2cad.occ import write_iges, write_step
-    from pde2cad.report import build_report
-
-    t0 = time.perf_counter()
-    step = staging.path(outputs["output"])
-    write_step(rec.shape, step, schema=args.schema, units=args.units)
-    if "iges" in outputs:
-        write_iges(rec.shape, staging.path(outputs["iges"]), units=args.units)
-    timings["write"] = time.perf_counter() - t0
-    progress.message("written; reading the STEP back to measure the seams")
-
-    t0 = time.perf_counter()
-    report = build_report(
-        rec, step, units=args.units,
-        input_info={"file": str(args.cloud), "points": n_read, "points_used": n_used,
-                    "segments": len(rec.labels), "labels_from": source},
-        settings={"continuity": args.continuity, "terms": args.terms,
-                  "tolerance": args.tolerance, "cad_tolerance": args.cad_tolerance,
-                  "units": args.units, "schema": args.schema, "outliers": args.outliers,
-                  "voxel": args.voxel},
-        # The orthogonal errors cost one more projection of every point; only the JSON
-        # report shows them.
-        orthogonal="report" in outputs,
-    )  # fmt: skip
-    report["outputs"] = {
-        ("step" if key == "output" else key): str(path) for key, path in outputs.items()
-    }
-    timings["check"] = time.perf_counter() - t0
-
-    if args.freecad_check:
-        from pde2cad.fc import read_back
-
-        progress.message("reading the STEP with FreeCAD")
-        t0 = time.perf_counter()
-        report["freecad"] = read_back(step)
-        timings["freecad_check"] = time.perf_counter() - t0
-
-    if "preview" in outputs:
-        from pde2cad.plots.preview import reconstruction_preview
-
-        t0 = time.perf_counter()
-        reconstruction_preview(rec, staging.path(outputs["preview"]),
-                               title=f"{Path(args.cloud).name}: {len(rec.labels)} patches")
-        timings["preview"] = time.perf_counter() - t0
-    return report
 
 
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [_add_vectorize, _add_reconstruct]

@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import TYPE_CHECKING, Any, Literal, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,12 +35,17 @@ from scipy.spatial import cKDTree
 from pde2cad.bspline.convert import patch_to_bspline
 from pde2cad.bspline.data import BSplineSurface
 from pde2cad.errors import FitError, InputError
+from pde2cad.frame import Frame
 from pde2cad.io.clouds import as_labels
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
+
+if TYPE_CHECKING:
+    import build123d
+    import cadquery
 
 #: Default CAD (deformation -> B-spline) tolerance, relative to the cloud's bbox diagonal.
 CAD_TOLERANCE = 1e-4
@@ -81,6 +86,7 @@ class SurfaceModel:
     network : EdgeNetwork
         Corners, side loops, edge curves and their fit errors.
     layout : Layout
+        Adjacency, borders and rough corners (without its KD-tree).
     edges : dict[(int, int), PiecewiseBezier]
         The shared curve of each edge, keyed by sorted global corner ids, running from the
         smaller id to the larger (``network.curves``).
@@ -99,6 +105,8 @@ class SurfaceModel:
         see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
     timings : dict[str, float]
         Seconds per stage.
+    frame : Frame
+        The centred, normalised frame the fit ran in (``local = (world - centre) / scale``).
     """
 
     surfaces: dict[int, BSplineSurface]
@@ -112,6 +120,7 @@ class SurfaceModel:
     diagonal: float
     c0_fallback: list[int] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    frame: Frame | None = None
 
     @property
     def sew_tolerance(self) -> float:
@@ -163,13 +172,13 @@ class Reconstruction:
 
         return write_iges(self.shape, path, units=units, **options)
 
-    def to_build123d(self) -> Any:
+    def to_build123d(self) -> build123d.Shape:
         """The shape as a build123d ``Solid`` (closed) or ``Shell`` (open)."""
         from pde2cad.occ import to_build123d
 
         return to_build123d(self.shape)
 
-    def to_cadquery(self) -> Any:
+    def to_cadquery(self) -> cadquery.Shape:
         """The shape as a CadQuery ``Solid`` (closed) or ``Shell`` (open)."""
         from pde2cad.occ import to_cadquery
 
@@ -251,7 +260,12 @@ def check_cloud(points: ArrayLike, labels: ArrayLike) -> tuple[NDArray[np.float6
     return pts, as_labels(lab, len(pts), "the labels argument")
 
 
-def _check_options(continuity: str, tolerance: float | None, cad_tolerance: float | None) -> None:
+def _check_options(m: object, n: object, continuity: str, tolerance: float | None,
+                   cad_tolerance: float | None) -> None:
+    for name, terms in (("m", m), ("n", n)):
+        if terms != "auto" and (isinstance(terms, bool)
+                                or not isinstance(terms, (int, np.integer)) or terms < 1):
+            raise InputError(f'{name} must be a whole number >= 1 or "auto", got {terms!r}')
     for name, value in (("tolerance", tolerance), ("cad_tolerance", cad_tolerance)):
         if value is None:
             continue
@@ -290,7 +304,7 @@ def _build_network(
 
 def _fit_c1(
     patches: dict[int, Patch], network: EdgeNetwork, m: Terms, n: Terms,
-    tolerance: float | None, diagonal: float, tick: Callable[[], None],
+    tolerance: float | None, tick: Callable[[], None],
 ) -> list[int]:
     """Refit every patch C1 on the shared ribbons; returns the labels kept C0."""
     order = sorted(patches)
@@ -318,7 +332,7 @@ def _fit_c1(
         # say so in c0_fallback.
         # fit_errors: the fit's own mean (Patch.errors would project every point again).
         if c1 is not None and c1.fit_errors["mean"] <= max(
-            C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR * diagonal
+            C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR  # x the unit diagonal
         ):
             patches[label] = c1
         else:
@@ -328,10 +342,11 @@ def _fit_c1(
 
 def _fit_patches(
     pts: NDArray[np.float64], lab: NDArray[np.int64], network: EdgeNetwork, m: Terms,
-    n: Terms, continuity: str, tolerance: float | None, diagonal: float,
-    progress: Progress | None,
+    n: Terms, continuity: str, tolerance: float | None, progress: Progress | None,
 ) -> tuple[dict[int, Patch], list[int]]:
-    """Step 3 of :func:`fit_surfaces`: one C0 patch per segment, then (C1) the C1 refits."""
+    """Step 3 of :func:`fit_surfaces`: one C0 patch per segment, then (C1) the C1 refits.
+
+    In the working frame (unit diagonal): ``tolerance`` already divided by the scale."""
     order = sorted(network.loops)
     steps = len(order) * (2 if continuity == "c1" else 1)
     done = iter(range(steps))
@@ -346,7 +361,7 @@ def _fit_patches(
             pts[lab == label], continuity="c0", m=m, n=n, tolerance=tolerance,
             boundary=network.sides(label),
         )
-    fallback = _fit_c1(patches, network, m, n, tolerance, diagonal, tick) if continuity == "c1" else []
+    fallback = _fit_c1(patches, network, m, n, tolerance, tick) if continuity == "c1" else []
     _report(progress, "patches", steps, steps)
     return patches, fallback
 
@@ -367,10 +382,13 @@ def fit_surfaces(
     The kernel-neutral stage of :func:`reconstruct` (numpy/scipy only): no CAD kernel is
     imported, so it runs in FreeCAD's Python as well as with OCP.
 
-    1. Validate the cloud (:func:`check_cloud`) and the options.
+    1. Validate the cloud (:func:`check_cloud`) and the options; move the cloud into a
+       centred frame with a unit diagonal (:class:`~pde2cad.frame.Frame`), so the result
+       does not depend on where the cloud sits or its unit.
     2. Layout and edge network (:func:`_build_network`).
     3. Patches, C0 then optionally C1 (:func:`_fit_patches`).
-    4. Each patch to a B-spline surface within ``cad_tolerance``.
+    4. Each patch to a B-spline surface within ``cad_tolerance``; surfaces, patches, edges,
+       corners and errors mapped back to the caller's coordinates.
 
     Parameters
     ----------
@@ -402,29 +420,41 @@ def fit_surfaces(
     -------
     SurfaceModel
     """
-    pts, lab = check_cloud(points, labels)
-    _check_options(continuity, tolerance, cad_tolerance)
-    diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    world, lab = check_cloud(points, labels)
+    _check_options(m, n, continuity, tolerance, cad_tolerance)
+    frame = Frame.of(world)
+    pts = frame.to_local(world)
     timings: dict[str, float] = {}
     layout, network = _build_network(pts, lab, continuity, timings, progress)
 
     t0 = time.perf_counter()
-    patches, fallback = _fit_patches(
-        pts, lab, network, m, n, continuity, tolerance, diagonal, progress
-    )
+    try:
+        patches, fallback = _fit_patches(
+            pts, lab, network, m, n, continuity, frame.length_to_local(tolerance), progress
+        )
+    except FitError as exc:
+        # The fit ran in the working frame: its figures are fractions of the diagonal.
+        raise FitError(f"{exc} (lengths in this message are fractions of the cloud's "
+                       f"bounding-box diagonal, {frame.scale:.6g} in its units)") from exc
     timings["patches"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    cad_tol = float(cad_tolerance) if cad_tolerance is not None else CAD_TOLERANCE * diagonal
+    cad_tol = CAD_TOLERANCE if cad_tolerance is None else cad_tolerance / frame.scale
     _report(progress, "cad", 0, 1)
     surfaces = {
-        label: patch_to_bspline(p.base, p.deformation, cad_tol) for label, p in patches.items()
+        label: frame.surface(patch_to_bspline(p.base, p.deformation, cad_tol))
+        for label, p in patches.items()
+    }
+    world_net = frame.network(network)
+    world_patches: dict[int, Patch] = {
+        label: frame.patch(p, world[lab == label]) for label, p in patches.items()
     }
     timings["bspline"] = time.perf_counter() - t0
     return SurfaceModel(
-        surfaces=surfaces, labels=sorted(patches), patches=patches, network=network,
-        layout=layout, edges=network.curves, edge_errors=network.errors,
-        corners=network.corners, diagonal=diagonal, c0_fallback=fallback, timings=timings,
+        surfaces=surfaces, labels=sorted(patches), patches=world_patches, network=world_net,
+        layout=frame.layout(layout), edges=world_net.curves,
+        edge_errors=world_net.errors, corners=world_net.corners, diagonal=frame.scale,
+        c0_fallback=fallback, timings=timings, frame=frame,
     )
 
 

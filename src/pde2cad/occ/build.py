@@ -7,8 +7,11 @@ out); both sew at ``model.sew_tolerance``.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
+from OCP.Message import Message, Message_Gravity
 from OCP.TopoDS import TopoDS_Face, TopoDS_Shape
 
 from pde2cad.occ.shape import SewInfo, make_face, sew
@@ -41,4 +44,18 @@ def build_shape(model: SurfaceModel) -> tuple[TopoDS_Shape, list[TopoDS_Face], S
     return shape, faces, info
 
 
-__all__ = ["build_shape"]
+@contextmanager
+def quiet_messages() -> Iterator[None]:
+    """Silence OCCT's messages (its transfer statistics go to stdout) inside the block."""
+    printers = list(Message.DefaultMessenger_s().Printers())
+    levels = [p.GetTraceLevel() for p in printers]
+    for p in printers:
+        p.SetTraceLevel(Message_Gravity.Message_Fail)
+    try:
+        yield
+    finally:
+        for p, level in zip(printers, levels, strict=True):
+            p.SetTraceLevel(level)
+
+
+__all__ = ["build_shape", "quiet_messages"]
