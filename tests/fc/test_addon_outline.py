@@ -198,16 +198,21 @@ def test_export_writes_the_project_dxf_and_svg(freecad, tmp_path: Path) -> None:
 
 def test_untangle_cuts_fishtails_and_self_loops(freecad) -> None:  # noqa: ANN001
     """Synthetic tangles of the kind the fit leaves within tolerance: two curves that
-    overshoot a square's corner and cross, and a cubic that loops on itself. Untangled, each
+    overshoot a square's corner and cross (also within the last sample span, where only the
+    magnified search sees it), and a cubic that loops on itself. Untangled, each
     loop makes a valid face; the cut moves the outline by less than the overshoot."""
     out = freecad("""
         import numpy as np, Part
-        from pde2cad.fc.outline import loop_wire, untangle
+        from pde2cad.fc.outline import crossing, loop_wire, untangle
         fish = np.array([
             [[0, 0], [3, 0], [10.8, -0.3], [10, 0]],
             [[10, 0], [10.3, -0.8], [10, 7], [10, 10]],
             [[10, 10], [7, 10], [3, 10], [0, 10]],
             [[0, 10], [0, 7], [0, 3], [0, 0]]], dtype=float)
+        # The same corner on a 1 m square: the crossing falls inside the last sample span.
+        cusp = fish * 100.0
+        cusp[0, 2], cusp[1, 1] = [1000.8, -0.3], [1000.3, -0.8]
+        out["zoom"] = [crossing(cusp[0], cusp[1], zoom=0) is None, crossing(cusp[0], cusp[1]) is not None]
         loop = np.array([
             [[0, 0], [4, 2], [-1, 2], [3, 0]],
             [[3, 0], [2, -3], [1, -3], [0, 0]]], dtype=float)
@@ -222,6 +227,7 @@ def test_untangle_cuts_fishtails_and_self_loops(freecad) -> None:  # noqa: ANN00
         assert not before and after, name
         assert gap == 0.0  # joints exact
     assert out["res"]["fish"][3] == 4 and out["res"]["loop"][3] == 3
+    assert out["zoom"] == [True, True]
 
 
 def test_outline_persists(freecad, tmp_path: Path) -> None:  # noqa: ANN001

@@ -112,19 +112,30 @@ def _refine(a: NDArray[np.float64], b: NDArray[np.float64], u: float, v: float) 
     return (u, v) if 0 < u < 1 and 0 < v < 1 else None
 
 
-def crossing(a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
+def crossing(
+    a: NDArray[np.float64], b: NDArray[np.float64], samples: int = 200, zoom: int = 2
+) -> tuple[float, float] | None:
     """Where the cubic ``a`` crosses the cubic ``b`` that starts at its end, nearest that
     joint along ``a``: parameters ``(u, v)`` with ``a(u) = b(v)``, or None.
 
     1. Proper crossings of the two sampled polylines (the shared end point does not count).
     2. The one of largest ``u``, refined by Newton steps on ``a(u) - b(v)``.
+    3. None found: the last sample span of ``a`` and the first of ``b`` share the joint, so
+       a crossing inside them (a cusp whose two sides run back over each other) cannot show;
+       look again in those spans, magnified ``samples`` times (``zoom`` levels).
     """
     t = np.linspace(0.0, 1.0, samples + 1)
     ij, x, y = _polyline_hits(_bezier(a, t), _bezier(b, t))
-    if not len(ij):
+    if len(ij):
+        k = int(np.argmax(ij[:, 0] + x))
+        return _refine(a, b, t[ij[k, 0]] + x[k] / samples, t[ij[k, 1]] + y[k] / samples)
+    if zoom <= 0:
         return None
-    k = int(np.argmax(ij[:, 0] + x))
-    return _refine(a, b, t[ij[k, 0]] + x[k] / samples, t[ij[k, 1]] + y[k] / samples)
+    h = 1.0 / samples
+    inner = crossing(split(a, 1.0 - h)[1], split(b, h)[0], samples, zoom - 1)
+    if inner is None:
+        return None
+    return _refine(a, b, 1.0 - h + inner[0] * h, inner[1] * h)
 
 
 def self_crossing(a: NDArray[np.float64], samples: int = 200) -> tuple[float, float] | None:
