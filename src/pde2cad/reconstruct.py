@@ -32,6 +32,7 @@ from pde2cad.errors import FitError, InputError
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
+from pde2cad.layout.split import SplitReport, split_segments
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Patch, fit_patch
 
@@ -94,6 +95,9 @@ class Reconstruction:
         ``C1_ERROR_FLOOR`` of the diagonal); their edges are only positionally joined.
         3-sided segments are fitted C1 like 4-sided ones (bicubic base with a collapsed top,
         see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
+    splits : SplitReport
+        The input segments split into 3/4-sided pieces (:mod:`pde2cad.layout.split`) and
+        their pieces' labels (the keys of ``patches``).
     """
 
     shape: Any
@@ -110,6 +114,7 @@ class Reconstruction:
     timings: dict[str, float] = field(default_factory=dict)
     network: EdgeNetwork | None = None
     c0_fallback: list[int] = field(default_factory=list)
+    splits: SplitReport = field(default_factory=SplitReport)
 
     def write_step(self, path: str | Path, units: str = "MM") -> Path:
         """Write the sewn shape to a STEP file."""
@@ -164,7 +169,8 @@ def reconstruct(
     ----------
     points : (N, 3) float
     labels : (N,) int
-        One segment label per point; every segment must be a 3- or 4-sided region.
+        One segment label per point. A segment with more than 4 corners (merged patches, a
+        neighbour's corner on its side) is split into 3/4-sided pieces, see ``splits``.
     m, n : int or "auto"
         Deformation terms per patch (see :func:`~pde2cad.surfaces.patch.fit_patch`).
         ``"auto"`` (default): per patch, the ``M = N`` that best predicts held-out points
@@ -211,6 +217,8 @@ def reconstruct(
     tree = getattr(layout, "tree", None)
     if tree is None:
         tree = cKDTree(pts, balanced_tree=False)
+    # Segments with 5+ corners (merged patches, T-junctions) -> 3/4-sided pieces, new labels.
+    lab, layout, splits = split_segments(pts, lab, layout, tree)
     timings["layout"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -289,6 +297,7 @@ def reconstruct(
         edge_errors=network.errors,
         network=network,
         c0_fallback=fallback,
+        splits=splits,
         diagonal=diagonal,
         timings=timings,
     )

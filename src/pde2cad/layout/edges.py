@@ -180,7 +180,7 @@ def key_of(a: int, b: int) -> Key:
 
 
 # --------------------------------------------------------------------------- topology
-def _filter_corners(
+def filter_corners(
     layout: Layout, tree: cKDTree, labels: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], dict[int, list[int]]]:
     """Drop border kinks (two segments, no open boundary near); renumber the corners."""
@@ -490,7 +490,7 @@ def build_edges(
     lab = np.asarray(labels).astype(np.int64)
     tree = cKDTree(pts) if tree is None else tree
     radius, spacing = layout.radius, layout.spacing
-    corners, seg_corners = _filter_corners(layout, tree, lab)
+    corners, seg_corners = filter_corners(layout, tree, lab)
     for label, ids in seg_corners.items():
         if len(ids) not in (3, 4):
             raise InputError(

@@ -1,0 +1,278 @@
+"""Split segments that are no 3- or 4-sided region into 3/4-sided sub-segments.
+
+A segmentation made by hand or by region growing rarely gives every segment three or four
+corners: two patches merged give a hexagon, and their neighbours keep the old corner on
+their side (a T-junction, which makes them pentagons). :func:`split_segments` cuts such a
+segment along *chords* between its own corners, so no new corner appears on a side it
+shares with a neighbour (a new point there would be a T-junction of the neighbour in turn,
+and the splitting would spread over the whole surface):
+
+1. **Corners in order.** The segment's patch corners (the layout's, minus border kinks, as
+   :func:`~pde2cad.layout.edges.build_edges` keeps them) are ordered along its boundary loop
+   (:attr:`~pde2cad.layout.adjacency.Layout.loops`).
+2. **Chords.** In the segment's PCA plane the corners form a polygon; it is split
+   recursively by chords between corners into pieces of 3 or 4 corners, choosing the split
+   whose pieces' corner angles deviate least from 90 degrees (quads) or 60 (triangles). A
+   T-node (a corner at a straight angle) thus becomes an end of a chord, never the apex of a
+   flat triangle; a 2 x 1 hexagon is cut back into its two squares.
+3. **Relabel.** Each point goes to the piece on its side of the chords (straight lines in the
+   PCA plane through the two corners); the first piece keeps the label, the others get new
+   labels above every label in use. The layout is built again on the new labels, so the new
+   seams are ordinary shared edges (one curve fitted on the surface, shared ribbons for C1).
+
+A piece with fewer than ``MIN_PIECE_POINTS`` points cannot be fitted: an
+:class:`~pde2cad.errors.InputError` names the segment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from pde2cad.errors import InputError
+from pde2cad.layout.adjacency import Layout, build_layout
+from pde2cad.layout.edges import filter_corners
+from pde2cad.surfaces.region import pca_frame
+
+#: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
+MIN_PIECE_POINTS = 50
+#: Largest corner count split (the recursion tries every chord of every piece).
+MAX_CORNERS = 12
+#: Corner normals: PCA of the segment's points within this many neighbour radii.
+CORNER_REACH = 4.0
+#: Side directions at a corner: from LOOP_FROM to LOOP_TO x CORNER_REACH of loop arc away.
+LOOP_FROM = 0.5
+LOOP_TO = 1.5
+#: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
+IDEAL_ANGLE = {3: 60.0, 4: 90.0}
+
+
+@dataclass(frozen=True)
+class SplitReport:
+    """What :func:`split_segments` did.
+
+    Attributes
+    ----------
+    pieces : dict[int, list[int]]
+        Per split input label, the labels of its pieces (the first is the label itself).
+    corners : dict[int, int]
+        Per split input label, how many corners it had.
+    """
+
+    pieces: dict[int, list[int]] = field(default_factory=dict)
+    corners: dict[int, int] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
+        return "\n".join(
+            f"segment {label}: {self.corners[label]} corners -> {len(p)} pieces {p}"
+            for label, p in sorted(self.pieces.items())
+        )
+
+
+def _angle(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Angle (degrees) between two vectors."""
+    cos = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-300)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def best_split(directions: dict[tuple[int, int], NDArray[np.float64]], n: int) -> list[tuple[int, ...]]:
+    """Pieces (tuples of corner positions ``0 .. n - 1`` in loop order) of 3 or 4 corners.
+
+    Step 2 of the module docstring: recursive chords, cost = the largest deviation of a
+    piece's corner angle from its ideal. ``directions[(i, j)]`` is the direction in which
+    the side or chord from corner ``i`` to corner ``j`` leaves ``i`` (in its tangent plane);
+    a polygon of 3 or 4 corners is one piece.
+    """
+
+    def cost(ids: tuple[int, ...]) -> float:
+        k = len(ids)
+        dev = [
+            abs(_angle(directions[(ids[s], ids[s - 1])], directions[(ids[s], ids[(s + 1) % k])])
+                - IDEAL_ANGLE[k])
+            for s in range(k)
+        ]
+        return max(dev)
+
+    @lru_cache(maxsize=None)
+    def solve(ids: tuple[int, ...]) -> tuple[float, tuple[tuple[int, ...], ...]]:
+        if len(ids) in IDEAL_ANGLE:
+            return cost(ids), (ids,)
+        best: tuple[float, tuple[tuple[int, ...], ...]] = (np.inf, ())
+        m = len(ids)
+        for i in range(m):
+            for j in range(i + 2, m):
+                if i == 0 and j == m - 1:
+                    continue
+                ca, pa = solve(ids[i : j + 1])
+                if ca >= best[0]:
+                    continue
+                cb, pb = solve(ids[j:] + ids[: i + 1])
+                if max(ca, cb) < best[0]:
+                    best = (max(ca, cb), pa + pb)
+        return best
+
+    return list(solve(tuple(range(n)))[1])
+
+
+def _directions(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64],
+    axis: NDArray[np.float64], reach: float,
+) -> dict[tuple[int, int], NDArray[np.float64]]:
+    """Directions leaving each corner (``xyz``, in loop order) towards every other corner, in
+    its tangent plane (PCA of the segment's ``points`` within ``reach``).
+
+    To its loop neighbours: along the boundary loop, from the loop point ``LOOP_FROM x
+    reach`` of arc away to the one ``LOOP_TO x reach`` away (at most a quarter and half of
+    the way to them): not from the corner itself, which may lie up to a neighbour radius off
+    its sides (that tilted a T-node's straight angle to ~150 degrees), and not far along a
+    curved side (a chord over it turns with the side). To the others: along the cut that
+    :func:`_assign_pieces` makes, the surface's intersection with the plane through both
+    corners and the segment's PCA normal ``axis``."""
+    n = len(xyz)
+    _, at = cKDTree(loop).query(xyz)
+    tree = cKDTree(points)
+    out: dict[tuple[int, int], NDArray[np.float64]] = {}
+    for i in range(n):
+        near = points[tree.query_ball_point(xyz[i], reach)]
+        if len(near) < 3:
+            near = points[tree.query(xyz[i], k=min(len(points), 12))[1]]
+        normal = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1]
+        for j in range(n):
+            if j == i:
+                continue
+            if j in ((i + 1) % n, (i - 1) % n):
+                sign = 1 if j == (i + 1) % n else -1
+                run = (np.arange(len(loop)) * sign + at[i]) % len(loop)
+                stop = int(np.flatnonzero(run == at[j])[0])
+                path = loop[run[: stop + 1]]
+                arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+                lo = min(int(np.searchsorted(arc, LOOP_FROM * reach)), stop // 4)
+                hi = max(min(int(np.searchsorted(arc, LOOP_TO * reach)), stop // 2), lo + 1)
+                d = path[hi] - path[lo]
+            else:
+                d = np.cross(normal, np.cross(xyz[j] - xyz[i], axis))
+                if d @ (xyz[j] - xyz[i]) < 0:
+                    d = -d
+            out[(i, j)] = d - (d @ normal) * normal
+    return out
+
+
+def _ordered_corners(
+    layout: Layout, points: NDArray[np.float64], label: int, ids: list[int], corners: NDArray[np.float64]
+) -> list[int]:
+    """The segment's corner ids in the order of its boundary loop."""
+    loop = points[layout.loops[label]]
+    _, where = cKDTree(loop).query(corners[ids])
+    return [ids[k] for k in np.argsort(where, kind="stable")]
+
+
+def _assign_pieces(
+    uv: NDArray[np.float64], poly: NDArray[np.float64], pieces: list[tuple[int, ...]]
+) -> NDArray[np.int64]:
+    """Index of the piece each point (uv, (P, 2)) falls in: for every piece, the chords
+    bounding it are lines through two of its corners; a point belongs to the piece on whose
+    inner side of all its chords it lies (ties to the piece with the smallest violation)."""
+    violation = np.zeros((len(uv), len(pieces)))
+    chord_set = _chords(pieces)
+    for p, piece in enumerate(pieces):
+        inner = poly[list(piece)].mean(axis=0)
+        k = len(piece)
+        for s in range(k):
+            a, b = piece[s], piece[(s + 1) % k]
+            if (min(a, b), max(a, b)) not in chord_set:
+                continue
+            d = poly[b] - poly[a]
+            normal = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300)
+            if (inner - poly[a]) @ normal < 0:
+                normal = -normal
+            violation[:, p] += np.maximum(0.0, -(uv - poly[a]) @ normal)
+    return np.argmin(violation, axis=1)
+
+
+def _chords(pieces: list[tuple[int, ...]]) -> set[tuple[int, int]]:
+    """Piece sides used by two pieces (the cuts)."""
+    count: dict[tuple[int, int], int] = {}
+    for piece in pieces:
+        for s in range(len(piece)):
+            a, b = piece[s], piece[(s + 1) % len(piece)]
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+    return {key for key, c in count.items() if c > 1}
+
+
+def split_segments(
+    points: NDArray[np.float64],
+    labels: NDArray[np.int64],
+    layout: Layout,
+    tree: cKDTree,
+) -> tuple[NDArray[np.int64], Layout, SplitReport]:
+    """Split every segment with more than 4 corners into 3/4-sided pieces.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    labels : (N,) int
+    layout : Layout
+        :func:`~pde2cad.layout.adjacency.build_layout` of ``points``, ``labels``.
+    tree : cKDTree
+        Of ``points``.
+
+    Returns
+    -------
+    labels : (N,) int
+        The new labels (the input array when nothing is split).
+    layout : Layout
+        The layout of the new labels (the input one when nothing is split).
+    report : SplitReport
+
+    Raises
+    ------
+    InputError
+        A piece of a split segment with fewer than ``MIN_PIECE_POINTS`` points, or a segment
+        with more than ``MAX_CORNERS`` corners (the message names the label).
+    """
+    corners, seg_corners = filter_corners(layout, tree, labels)
+    report = SplitReport()
+    out = labels.copy()
+    next_label = int(labels.max()) + 1
+    for label, ids in sorted(seg_corners.items()):
+        if len(ids) <= 4:
+            continue
+        if len(ids) > MAX_CORNERS:
+            raise InputError(
+                f"segment {label} has {len(ids)} corners (at most {MAX_CORNERS} are split "
+                "automatically); split it into smaller segments"
+            )
+        members = np.flatnonzero(labels == label)
+        order = _ordered_corners(layout, points, label, ids, corners)
+        origin, axes = pca_frame(points[members])
+        poly = (corners[order] - origin) @ axes[:2].T
+        loop = points[layout.loops[label]]
+        directions = _directions(
+            points[members], loop, corners[order], axes[2], CORNER_REACH * layout.radius
+        )
+        pieces = best_split(directions, len(order))
+        which = _assign_pieces((points[members] - origin) @ axes[:2].T, poly, pieces)
+        names = [label] + list(range(next_label, next_label + len(pieces) - 1))
+        next_label += len(pieces) - 1
+        counts = np.bincount(which, minlength=len(pieces))
+        if counts.min() < MIN_PIECE_POINTS:
+            raise InputError(
+                f"segment {label} has {len(ids)} corners and splitting it into 3/4-sided "
+                f"pieces leaves one with {int(counts.min())} points (need {MIN_PIECE_POINTS}); "
+                "sample the surface more densely or merge/split that segment by hand"
+            )
+        out[members] = np.asarray(names)[which]
+        report.pieces[int(label)] = names
+        report.corners[int(label)] = len(ids)
+    if not report.pieces:
+        return labels, layout, report
+    return out, build_layout(points, out, check=False), report
+
+
+__all__ = ["SplitReport", "best_split", "split_segments"]
