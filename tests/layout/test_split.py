@@ -79,13 +79,17 @@ def test_torus_two_patches_merged(tmp_path: Path) -> None:
 
 
 def test_torus_one_patch_split_in_two(tmp_path: Path) -> None:
-    """One torus patch cut in two across the tube: its two neighbours along the tube get a
-    T-node each (5 corners) and are cut into a triangle and a quad from it."""
+    """One torus patch cut in two across the tube: its two neighbours around the tube get a
+    T-node each (5 corners); each is cut straight across its strip, which puts a T-node on
+    both sides of the opposite patch (6 corners), cut between them: the cut closes around
+    the tube and every corner joins four patches (exact C1)."""
     cloud = samples.torus(20000)
     lab = cloud.labels.copy()
     lab[(lab == 0) & (_tube_angle(cloud.points) < np.pi / 4)] = 99
     rec = reconstruct(cloud.points, lab, continuity="c1")
-    assert sorted(rec.splits.pieces) == [1, 3]
+    assert sorted(rec.splits.pieces) == [1, 2, 3]
     assert all(len(p) == 2 for p in rec.splits.pieces.values())
-    m = _check(rec, cloud, tmp_path, 6.0)
-    assert m["n_faces"] == 19 and m["free_edges"] == 0
+    assert rec.splits.corners == {1: 5, 2: 6, 3: 5}
+    assert all(rec.network.regular.values()) and rec.c0_fallback == []
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 20 and m["free_edges"] == 0

@@ -47,6 +47,12 @@ CORNER_REACH = 4.0
 #: Side directions at a corner: from LOOP_FROM to LOOP_TO x CORNER_REACH of loop arc away.
 LOOP_FROM = 0.5
 LOOP_TO = 1.5
+#: A corner whose sides leave it at this angle or more (degrees) is a T-node (a neighbour's
+#: corner on a straight side). Measured: T-nodes 150-178, real corners of torus patches
+#: 65-125.
+FLAT_ANGLE = 145.0
+#: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
+MAX_ROUNDS = 6
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
 IDEAL_ANGLE = {3: 60.0, 4: 90.0}
 
@@ -205,13 +211,99 @@ def _chords(pieces: list[tuple[int, ...]]) -> set[tuple[int, int]]:
     return {key for key, c in count.items() if c > 1}
 
 
+def _strip_cuts(
+    loop: NDArray[np.float64], at: NDArray[np.int64], real: NDArray[np.int64],
+    flat: NDArray[np.int64],
+) -> list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]]:
+    """Cuts of a quad with T-nodes (``flat``: corner positions at a straight angle, ``real``:
+    the 4 others, both in loop order, ``at``: each corner's loop index): per direction (sides
+    0-2, sides 1-3), the cuts as (start, end) points ordered away from ``real[0]`` (resp.
+    ``real[1]``). T-nodes on opposite sides are joined in order when both sides have as many;
+    otherwise each runs straight across to the loop point at the mirrored fraction of the
+    opposite side (which becomes a T-node of the neighbour there, split in the next round:
+    the cut runs along the strip of quads until it meets an open boundary or closes)."""
+    n = len(loop)
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1))]
+
+    def along(k: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Loop indices of side k and their arc fractions from its start."""
+        i0, i1 = at[real[k % 4]], at[real[(k + 1) % 4]]
+        idx = np.arange(i0, i1 + (n if i1 < i0 else 0) + 1) % n
+        s = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(loop[idx], axis=0), axis=1)])
+        return idx, s / max(float(s[-1]), 1e-300)
+
+    sides = [along(k) for k in range(4)]
+    t_of = {}
+    for f in flat:
+        k = next(k for k in range(4) if at[f] in sides[k][0])
+        idx, frac = sides[k]
+        t_of.setdefault(k, []).append(float(frac[int(np.flatnonzero(idx == at[f])[0])]))
+    del arc
+    cuts: list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = [[], []]
+    for k in (0, 1):
+        mine, theirs = sorted(t_of.get(k, [])), sorted(1.0 - g for g in t_of.get(k + 2, []))
+        if len(mine) == len(theirs):
+            pairs = list(zip(mine, theirs))
+        else:
+            pairs = [(f, f) for f in mine] + [(g, g) for g in theirs]
+        for f, g in sorted(pairs):
+            (ia, fa), (ib, fb) = sides[k], sides[k + 2]
+            start = loop[ia[int(np.argmin(np.abs(fa - f)))]]
+            end = loop[ib[int(np.argmin(np.abs(fb - (1.0 - g))))]]
+            cuts[k].append((start, end))
+    return cuts
+
+
+def _cell_of(
+    xy: NDArray[np.float64], cuts: list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]],
+    refs: list[NDArray[np.float64]],
+) -> NDArray[np.int64]:
+    """Grid cell (flattened) of each point ``xy`` (P, 2): per direction, how many of its cut
+    lines the point lies beyond (on the side away from ``refs[k]``)."""
+    count = []
+    for lines, ref in zip(cuts, refs):
+        beyond = np.zeros(len(xy), dtype=np.int64)
+        for a, b in lines:
+            d = b - a
+            normal = np.array([-d[1], d[0]])
+            side = (xy - a) @ normal
+            beyond += (side * float((ref - a) @ normal) < 0).astype(np.int64)
+        count.append(beyond)
+    return count[0] * (len(cuts[1]) + 1) + count[1]
+
+
+def _split_one(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
+) -> NDArray[np.int64]:
+    """Piece index (0, 1, ...) of each of a segment's ``points``, given its boundary ``loop``
+    and corners ``xyz`` in loop order: strip cuts for a quad with T-nodes, chords otherwise."""
+    origin, axes = pca_frame(points)
+    xy = (points - origin) @ axes[:2].T
+    directions = _directions(points, loop, xyz, axes[2], reach)
+    n = len(xyz)
+    angle = np.array([_angle(directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]) for i in range(n)])
+    flat = np.flatnonzero(angle >= FLAT_ANGLE)
+    if n - len(flat) == 4:
+        real = np.flatnonzero(angle < FLAT_ANGLE)
+        _, at = cKDTree(loop).query(xyz)
+        cuts = _strip_cuts(loop, at, real, flat)
+        to2d = [[((a - origin) @ axes[:2].T, (b - origin) @ axes[:2].T) for a, b in c] for c in cuts]
+        refs = [(xyz[real[k]] - origin) @ axes[:2].T for k in (0, 1)]
+        cell = _cell_of(xy, to2d, refs)
+    else:
+        poly = (xyz - origin) @ axes[:2].T
+        cell = _assign_pieces(xy, poly, best_split(directions, n))
+    return np.unique(cell, return_inverse=True)[1].reshape(-1)
+
+
 def split_segments(
     points: NDArray[np.float64],
     labels: NDArray[np.int64],
     layout: Layout,
     tree: cKDTree,
 ) -> tuple[NDArray[np.int64], Layout, SplitReport]:
-    """Split every segment with more than 4 corners into 3/4-sided pieces.
+    """Split every segment with more than 4 corners into 3/4-sided pieces (in up to
+    ``MAX_ROUNDS`` rounds: a strip cut makes a T-node on the next segment of the strip).
 
     Parameters
     ----------
@@ -236,43 +328,47 @@ def split_segments(
         A piece of a split segment with fewer than ``MIN_PIECE_POINTS`` points, or a segment
         with more than ``MAX_CORNERS`` corners (the message names the label).
     """
-    corners, seg_corners = filter_corners(layout, tree, labels)
     report = SplitReport()
-    out = labels.copy()
-    next_label = int(labels.max()) + 1
-    for label, ids in sorted(seg_corners.items()):
-        if len(ids) <= 4:
-            continue
-        if len(ids) > MAX_CORNERS:
-            raise InputError(
-                f"segment {label} has {len(ids)} corners (at most {MAX_CORNERS} are split "
-                "automatically); split it into smaller segments"
+    out = labels
+    source: dict[int, int] = {}  # piece label -> input label
+    for _ in range(MAX_ROUNDS):
+        corners, seg_corners = filter_corners(layout, tree, out)
+        todo = [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4]
+        if not todo:
+            break
+        out = out.copy()
+        next_label = int(out.max()) + 1
+        for label, ids in todo:
+            first = source.get(label, label)
+            if len(ids) > MAX_CORNERS:
+                raise InputError(
+                    f"segment {first} has {len(ids)} corners (at most {MAX_CORNERS} are split "
+                    "automatically); split it into smaller segments"
+                )
+            members = np.flatnonzero(out == label)
+            order = _ordered_corners(layout, points, label, ids, corners)
+            which = _split_one(
+                points[members], points[layout.loops[label]], corners[order],
+                CORNER_REACH * layout.radius,
             )
-        members = np.flatnonzero(labels == label)
-        order = _ordered_corners(layout, points, label, ids, corners)
-        origin, axes = pca_frame(points[members])
-        poly = (corners[order] - origin) @ axes[:2].T
-        loop = points[layout.loops[label]]
-        directions = _directions(
-            points[members], loop, corners[order], axes[2], CORNER_REACH * layout.radius
-        )
-        pieces = best_split(directions, len(order))
-        which = _assign_pieces((points[members] - origin) @ axes[:2].T, poly, pieces)
-        names = [label] + list(range(next_label, next_label + len(pieces) - 1))
-        next_label += len(pieces) - 1
-        counts = np.bincount(which, minlength=len(pieces))
-        if counts.min() < MIN_PIECE_POINTS:
-            raise InputError(
-                f"segment {label} has {len(ids)} corners and splitting it into 3/4-sided "
-                f"pieces leaves one with {int(counts.min())} points (need {MIN_PIECE_POINTS}); "
-                "sample the surface more densely or merge/split that segment by hand"
-            )
-        out[members] = np.asarray(names)[which]
-        report.pieces[int(label)] = names
-        report.corners[int(label)] = len(ids)
-    if not report.pieces:
-        return labels, layout, report
-    return out, build_layout(points, out, check=False), report
+            counts = np.bincount(which)
+            if counts.min() < MIN_PIECE_POINTS:
+                raise InputError(
+                    f"segment {first} has {len(ids)} corners and splitting it into 3/4-sided "
+                    f"pieces leaves one with {int(counts.min())} points (need "
+                    f"{MIN_PIECE_POINTS}); sample the surface more densely or split that "
+                    "segment by hand"
+                )
+            names = [label] + list(range(next_label, next_label + len(counts) - 1))
+            next_label += len(counts) - 1
+            out[members] = np.asarray(names)[which]
+            pieces = report.pieces.setdefault(first, [first])
+            pieces += [n for n in names[1:]]
+            report.corners.setdefault(first, len(ids))
+            for name in names:
+                source[name] = first
+        layout = build_layout(points, out, check=False)
+    return out, layout, report
 
 
 __all__ = ["SplitReport", "best_split", "split_segments"]
