@@ -31,6 +31,8 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
@@ -51,6 +53,8 @@ LOOP_TO = 1.5
 #: corner on a straight side). Measured: T-nodes 150-178, real corners of torus patches
 #: 65-125.
 FLAT_ANGLE = 145.0
+#: Neighbours per point of the graph whose shortest paths measure distances on the surface.
+GRAPH_NEIGHBOURS = 8
 #: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
 MAX_ROUNDS = 6
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
@@ -211,65 +215,66 @@ def _chords(pieces: list[tuple[int, ...]]) -> set[tuple[int, int]]:
     return {key for key, c in count.items() if c > 1}
 
 
-def _strip_cuts(
-    loop: NDArray[np.float64], at: NDArray[np.int64], real: NDArray[np.int64],
-    flat: NDArray[np.int64],
-) -> list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]]:
-    """Cuts of a quad with T-nodes (``flat``: corner positions at a straight angle, ``real``:
-    the 4 others, both in loop order, ``at``: each corner's loop index): per direction (sides
-    0-2, sides 1-3), the cuts as (start, end) points ordered away from ``real[0]`` (resp.
-    ``real[1]``). T-nodes on opposite sides are joined in order when both sides have as many;
-    otherwise each runs straight across to the loop point at the mirrored fraction of the
-    opposite side (which becomes a T-node of the neighbour there, split in the next round:
-    the cut runs along the strip of quads until it meets an open boundary or closes)."""
+def _side_distances(
+    points: NDArray[np.float64], loop: NDArray[np.float64], at: NDArray[np.int64],
+    real: NDArray[np.int64],
+) -> NDArray[np.float64]:
+    """(4, P) distances along the surface (shortest paths in the k-NN graph of ``points``)
+    from each point to each side of a quad: side k is the boundary loop from corner
+    ``real[k]`` to ``real[k + 1]`` (``at``: the corners' loop indices)."""
     n = len(loop)
-    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1))]
+    k = min(GRAPH_NEIGHBOURS + 1, len(points))
+    tree = cKDTree(points)
+    dist, idx = tree.query(points, k=k)
+    rows = np.repeat(np.arange(len(points)), k - 1)
+    graph = coo_matrix((dist[:, 1:].ravel(), (rows, idx[:, 1:].ravel())), shape=(len(points),) * 2)
+    graph = graph.tocsr().maximum(graph.T.tocsr())
+    _, nearest = tree.query(loop)
+    out = np.empty((4, len(points)))
+    for side in range(4):
+        i0, i1 = at[real[side]], at[real[(side + 1) % 4]]
+        run = np.arange(i0, i1 + (n if i1 < i0 else 0) + 1) % n
+        out[side] = dijkstra(graph, indices=np.unique(nearest[run]), min_only=True)
+    finite = np.isfinite(out)
+    return np.where(finite, out, out[finite].max() if finite.any() else 0.0)
 
-    def along(k: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        """Loop indices of side k and their arc fractions from its start."""
-        i0, i1 = at[real[k % 4]], at[real[(k + 1) % 4]]
-        idx = np.arange(i0, i1 + (n if i1 < i0 else 0) + 1) % n
-        s = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(loop[idx], axis=0), axis=1)])
-        return idx, s / max(float(s[-1]), 1e-300)
 
-    sides = [along(k) for k in range(4)]
-    t_of = {}
-    for f in flat:
-        k = next(k for k in range(4) if at[f] in sides[k][0])
-        idx, frac = sides[k]
-        t_of.setdefault(k, []).append(float(frac[int(np.flatnonzero(idx == at[f])[0])]))
-    del arc
-    cuts: list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = [[], []]
-    for k in (0, 1):
-        mine, theirs = sorted(t_of.get(k, [])), sorted(1.0 - g for g in t_of.get(k + 2, []))
+def _strip_cells(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64],
+    real: NDArray[np.int64], flat: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Cell of each of a quad's ``points`` after its strip cuts (``flat``: T-node positions,
+    ``real``: the 4 other corners, in loop order).
+
+    Coordinates from the distances to the sides: ``a = d3 / (d3 + d1)`` runs along sides 0
+    and 2, ``b = d0 / (d0 + d2)`` along sides 1 and 3. A T-node on side 0 or 2 cuts along
+    ``a`` = const; joined to a T-node on the opposite side (when both sides have as many,
+    in order), ``a`` blends linearly in ``b`` between their values. Otherwise it runs
+    straight across and makes a T-node of the neighbour on the opposite side, split in the
+    next round: the cut runs along the strip of quads until it meets an open boundary or
+    closes. T-nodes on sides 1 and 3 cut likewise along ``b``. The cell is the number of
+    cuts of each direction a point lies beyond."""
+    _, at = cKDTree(loop).query(xyz)
+    d = _side_distances(points, loop, at, real)
+    a = d[3] / np.maximum(d[3] + d[1], 1e-300)
+    b = d[0] / np.maximum(d[0] + d[2], 1e-300)
+    _, t_at = cKDTree(points).query(xyz[flat])
+    side_of: dict[int, list[int]] = {}
+    for row in np.atleast_1d(t_at):
+        side_of.setdefault(int(np.argmin(d[:, row])), []).append(int(row))
+    cell = np.zeros(len(points), dtype=np.int64)
+    for k, (along, across) in enumerate(((a, b), (b, 1.0 - a))):
+        mine = sorted(float(along[r]) for r in side_of.get(k, []))
+        theirs = sorted(float(along[r]) for r in side_of.get(k + 2, []))
         if len(mine) == len(theirs):
             pairs = list(zip(mine, theirs))
         else:
-            pairs = [(f, f) for f in mine] + [(g, g) for g in theirs]
-        for f, g in sorted(pairs):
-            (ia, fa), (ib, fb) = sides[k], sides[k + 2]
-            start = loop[ia[int(np.argmin(np.abs(fa - f)))]]
-            end = loop[ib[int(np.argmin(np.abs(fb - (1.0 - g))))]]
-            cuts[k].append((start, end))
-    return cuts
-
-
-def _cell_of(
-    xy: NDArray[np.float64], cuts: list[list[tuple[NDArray[np.float64], NDArray[np.float64]]]],
-    refs: list[NDArray[np.float64]],
-) -> NDArray[np.int64]:
-    """Grid cell (flattened) of each point ``xy`` (P, 2): per direction, how many of its cut
-    lines the point lies beyond (on the side away from ``refs[k]``)."""
-    count = []
-    for lines, ref in zip(cuts, refs):
-        beyond = np.zeros(len(xy), dtype=np.int64)
-        for a, b in lines:
-            d = b - a
-            normal = np.array([-d[1], d[0]])
-            side = (xy - a) @ normal
-            beyond += (side * float((ref - a) @ normal) < 0).astype(np.int64)
-        count.append(beyond)
-    return count[0] * (len(cuts[1]) + 1) + count[1]
+            pairs = [(v, v) for v in mine + theirs]
+        beyond = np.zeros(len(points), dtype=np.int64)
+        for v0, v1 in pairs:
+            beyond += along > v0 + (v1 - v0) * across
+        cell = cell * (len(pairs) + 1) + beyond
+    return cell
 
 
 def _split_one(
@@ -284,12 +289,7 @@ def _split_one(
     angle = np.array([_angle(directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]) for i in range(n)])
     flat = np.flatnonzero(angle >= FLAT_ANGLE)
     if n - len(flat) == 4:
-        real = np.flatnonzero(angle < FLAT_ANGLE)
-        _, at = cKDTree(loop).query(xyz)
-        cuts = _strip_cuts(loop, at, real, flat)
-        to2d = [[((a - origin) @ axes[:2].T, (b - origin) @ axes[:2].T) for a, b in c] for c in cuts]
-        refs = [(xyz[real[k]] - origin) @ axes[:2].T for k in (0, 1)]
-        cell = _cell_of(xy, to2d, refs)
+        cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
     else:
         poly = (xyz - origin) @ axes[:2].T
         cell = _assign_pieces(xy, poly, best_split(directions, n))
