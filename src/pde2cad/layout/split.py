@@ -26,6 +26,7 @@ A piece with fewer than ``MIN_PIECE_POINTS`` points cannot be fitted: an
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -55,6 +56,8 @@ LOOP_TO = 1.5
 FLAT_ANGLE = 145.0
 #: Neighbours per point of the graph whose shortest paths measure distances on the surface.
 GRAPH_NEIGHBOURS = 8
+#: Neighbours per side point that tell which segment lies across a side.
+SIDE_NEIGHBOURS = 12
 #: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
 MAX_ROUNDS = 6
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
@@ -277,23 +280,89 @@ def _strip_cells(
     return cell
 
 
+def _corner_angles(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
+) -> tuple[dict[tuple[int, int], NDArray[np.float64]], NDArray[np.float64]]:
+    """:func:`_directions` of a segment's corners and each corner's angle between its sides."""
+    directions = _directions(points, loop, xyz, pca_frame(points)[1][2], reach)
+    n = len(xyz)
+    angle = np.array(
+        [_angle(directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]) for i in range(n)]
+    )
+    return directions, angle
+
+
 def _split_one(
     points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
 ) -> NDArray[np.int64]:
     """Piece index (0, 1, ...) of each of a segment's ``points``, given its boundary ``loop``
     and corners ``xyz`` in loop order: strip cuts for a quad with T-nodes, chords otherwise."""
-    origin, axes = pca_frame(points)
-    xy = (points - origin) @ axes[:2].T
-    directions = _directions(points, loop, xyz, axes[2], reach)
-    n = len(xyz)
-    angle = np.array([_angle(directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]) for i in range(n)])
+    directions, angle = _corner_angles(points, loop, xyz, reach)
     flat = np.flatnonzero(angle >= FLAT_ANGLE)
-    if n - len(flat) == 4:
+    if len(xyz) - len(flat) == 4:
         cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
     else:
+        origin, axes = pca_frame(points)
         poly = (xyz - origin) @ axes[:2].T
-        cell = _assign_pieces(xy, poly, best_split(directions, n))
+        cell = _assign_pieces((points - origin) @ axes[:2].T, poly, best_split(directions, len(xyz)))
     return np.unique(cell, return_inverse=True)[1].reshape(-1)
+
+
+def _side_labels(
+    points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, loop: NDArray[np.int64],
+    at: NDArray[np.int64], label: int, reach: float,
+) -> list[int]:
+    """The neighbour along each side of a segment (its loop, point indices, from corner
+    loop index ``at[i]`` to ``at[i + 1]``): the most common other label within ``reach`` of
+    the side's middle half, -1 for an open side."""
+    out = []
+    n = len(loop)
+    for i in range(len(at)):
+        i0, i1 = at[i], at[(i + 1) % len(at)]
+        run = np.arange(i0, i1 + (n if i1 <= i0 else 0) + 1) % n
+        run = run[len(run) // 4 : max(len(run) // 4 + 1, 3 * len(run) // 4)]
+        _, idx = tree.query(points[loop[run]], k=SIDE_NEIGHBOURS, distance_upper_bound=reach)
+        hit = labels[idx[idx < len(points)]]
+        hit = hit[hit != label]
+        out.append(int(np.bincount(hit - hit.min()).argmax() + hit.min()) if hit.size else -1)
+    return out
+
+
+def _drop_kinks(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree
+) -> Layout:
+    """The layout without corners that are kinks of a border: a corner of a segment with
+    more than 4 corners at a straight angle whose two sides border the same neighbour (a
+    wide segment's projection can make the layout see turns along a smooth border; a T-node
+    lies between two different neighbours)."""
+    corners, seg_corners = filter_corners(layout, tree, labels)
+    kinks: set[int] = set()
+    for label, ids in seg_corners.items():
+        if len(ids) <= 4:
+            continue
+        order = _ordered_corners(layout, points, label, ids, corners)
+        loop = layout.loops[label]
+        members = points[labels == label]
+        _, angle = _corner_angles(members, points[loop], corners[order], CORNER_REACH * layout.radius)
+        _, at = cKDTree(points[loop]).query(corners[order])
+        sides = _side_labels(points, labels, tree, loop, at, label, CORNER_REACH * layout.radius)
+        for i in range(len(order)):
+            if sides[i - 1] == sides[i] >= 0 and angle[i] >= FLAT_ANGLE:
+                kinks.add(order[i])
+    if not kinks:
+        return layout
+    drop = {int(np.flatnonzero((layout.corners == corners[c]).all(axis=1))[0]) for c in kinks}
+    keep = np.array([i not in drop for i in range(len(layout.corners))])
+    new_id = np.cumsum(keep) - 1
+    return dataclasses.replace(
+        layout,
+        corners=layout.corners[keep],
+        segment_corners={
+            label: new_id[[i for i in ids if keep[i]]].astype(np.int64)
+            for label, ids in layout.segment_corners.items()
+        },
+        open_corners=None if layout.open_corners is None else layout.open_corners[keep],
+    )
 
 
 def split_segments(
@@ -332,6 +401,7 @@ def split_segments(
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
     for _ in range(MAX_ROUNDS):
+        layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
         todo = [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4]
         if not todo:
@@ -368,6 +438,8 @@ def split_segments(
             for name in names:
                 source[name] = first
         layout = build_layout(points, out, check=False)
+    else:
+        layout = _drop_kinks(points, out, layout, tree)
     return out, layout, report
 
 
