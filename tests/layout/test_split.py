@@ -152,3 +152,17 @@ def test_teapot_body_patches_merged(
     assert m["max_angle_deg"] <= 1.0
     # The unsplit body + bottom: 1.4e-4 clean (the bottom's tight bend), 3.7e-4 noisy.
     assert _true_error(rec, cloud) <= (2e-4 if noise == 0 else 1e-3)
+
+
+@pytest.mark.parametrize("shape", ["cylinder", "sphere6"])
+def test_one_segment_without_corners(tmp_path: Path, shape: str) -> None:
+    """The whole tube or sphere as one segment (no corner at all): the tube is cut into 4
+    sectors around its axis (found as the PCA axis the points keep an even distance from,
+    not the main axis: the tube is as tall as it is wide); the sphere, seen from its
+    centroid in every direction, into the 6 faces of a cube map."""
+    cloud = samples.SHAPES[shape](20000)
+    rec = reconstruct(cloud.points, np.zeros(len(cloud.points), dtype=np.int64), continuity="c1")
+    assert rec.splits.pieces == {0: list(range(4 if shape == "cylinder" else 6))}
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == (4 if shape == "cylinder" else 6)
+    assert m["free_edges"] == (8 if shape == "cylinder" else 0)

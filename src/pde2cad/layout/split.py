@@ -58,6 +58,14 @@ FLAT_ANGLE = 145.0
 GRAPH_NEIGHBOURS = 8
 #: Neighbours per side point that tell which segment lies across a side.
 SIDE_NEIGHBOURS = 12
+#: A segment without corners is cut into sectors only when each holds this share of it.
+MIN_SECTOR_SHARE = 0.05
+#: A segment without neighbours is closed when seen from its centroid in every cell of a
+#: CLOSED_BINS x CLOSED_BINS grid on each cube-map face (a tube leaves its end faces empty).
+CLOSED_BINS = 4
+#: A corner is reflex when the loop turns clockwise there about a normal within
+#: arccos(REFLEX_COS) of the (counter-clockwise oriented) PCA normal.
+REFLEX_COS = 0.5
 #: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
 MAX_ROUNDS = 6
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
@@ -283,23 +291,58 @@ def _strip_cells(
 def _corner_angles(
     points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
 ) -> tuple[dict[tuple[int, int], NDArray[np.float64]], NDArray[np.float64]]:
-    """:func:`_directions` of a segment's corners and each corner's angle between its sides."""
-    directions = _directions(points, loop, xyz, pca_frame(points)[1][2], reach)
+    """:func:`_directions` of a segment's corners and each corner's interior angle between
+    its sides, 0-360 degrees (over 180 at a reflex corner: the loop turns clockwise there
+    about the PCA normal oriented so that the loop runs counter-clockwise)."""
+    origin, axes = pca_frame(points)
+    directions = _directions(points, loop, xyz, axes[2], reach)
+    uv = (loop - origin) @ axes[:2].T
+    area = float(np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1]))
+    normal = axes[2] if area >= 0 else -axes[2]
     n = len(xyz)
-    angle = np.array(
-        [_angle(directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]) for i in range(n)]
-    )
+    angle = np.empty(n)
+    for i in range(n):
+        back, ahead = directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]
+        angle[i] = _angle(back, ahead)
+        turn = np.cross(-back, ahead)
+        # Only where the corner's tangent plane is near the PCA plane (the sign means
+        # nothing where a wide segment turns away from it, e.g. the ends of a half-tube).
+        if float(normal @ turn) < -REFLEX_COS * float(np.linalg.norm(turn)):
+            angle[i] = 360.0 - angle[i]
     return directions, angle
+
+
+def _reflex_cells(
+    points: NDArray[np.float64], xyz: NDArray[np.float64],
+    directions: dict[tuple[int, int], NDArray[np.float64]], reflex: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Cells of a segment cut by the continuations of both sides of each reflex corner
+    (lines in its PCA plane): an L-shape becomes three quads."""
+    origin, axes = pca_frame(points)
+    xy = (points - origin) @ axes[:2].T
+    n = len(xyz)
+    cell = np.zeros(len(points), dtype=np.int64)
+    for r in reflex:
+        at = (xyz[r] - origin) @ axes[:2].T
+        for j in ((r - 1) % n, (r + 1) % n):
+            d = directions[(r, j)] @ axes[:2].T
+            side = (xy - at) @ np.array([-d[1], d[0]]) > 0
+            cell = 2 * cell + side
+    return cell
 
 
 def _split_one(
     points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
 ) -> NDArray[np.int64]:
     """Piece index (0, 1, ...) of each of a segment's ``points``, given its boundary ``loop``
-    and corners ``xyz`` in loop order: strip cuts for a quad with T-nodes, chords otherwise."""
+    and corners ``xyz`` in loop order: cuts from reflex corners first, then strip cuts for
+    a quad with T-nodes, chords otherwise."""
     directions, angle = _corner_angles(points, loop, xyz, reach)
-    flat = np.flatnonzero(angle >= FLAT_ANGLE)
-    if len(xyz) - len(flat) == 4:
+    flat = np.flatnonzero((angle >= FLAT_ANGLE) & (angle <= 360.0 - FLAT_ANGLE))
+    reflex = np.flatnonzero(angle > 360.0 - FLAT_ANGLE)
+    if len(reflex):
+        cell = _reflex_cells(points, xyz, directions, reflex)
+    elif len(xyz) - len(flat) == 4:
         cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
     else:
         origin, axes = pca_frame(points)
@@ -347,7 +390,7 @@ def _drop_kinks(
         _, at = cKDTree(points[loop]).query(corners[order])
         sides = _side_labels(points, labels, tree, loop, at, label, CORNER_REACH * layout.radius)
         for i in range(len(order)):
-            if sides[i - 1] == sides[i] >= 0 and angle[i] >= FLAT_ANGLE:
+            if sides[i - 1] == sides[i] >= 0 and FLAT_ANGLE <= angle[i] <= 360.0 - FLAT_ANGLE:
                 kinks.add(order[i])
     if not kinks:
         return layout
@@ -363,6 +406,66 @@ def _drop_kinks(
         },
         open_corners=None if layout.open_corners is None else layout.open_corners[keep],
     )
+
+
+def _cube_map(local: NDArray[np.float64], bins: int = 1) -> NDArray[np.int64]:
+    """Cube-map cell of each direction (rows of ``local``): its face (6) times a ``bins`` x
+    ``bins`` grid on that face."""
+    big = np.argmax(np.abs(local), axis=1)
+    top = local[np.arange(len(local)), big]
+    face = 2 * big + (top > 0)
+    rest = np.stack([local[np.arange(len(local)), (big + k) % 3] for k in (1, 2)], axis=1)
+    grid = np.clip(((rest / np.abs(top)[:, None] + 1) / 2 * bins).astype(np.int64), 0, bins - 1)
+    return (face * bins + grid[:, 0]) * bins + grid[:, 1]
+
+
+def _sectors(points: NDArray[np.float64], alone: bool) -> NDArray[np.int64] | None:
+    """Pieces of a segment without corners. Closed (``alone``: no neighbour, and points seen
+    from the centroid in every one of the ``CLOSED_BINS``^2 cells of each cube-map face): the
+    6 faces of a cube around its centroid (cube map in its PCA frame). Otherwise 4 sectors
+    around the PCA axis it wraps round (every sector holds ``MIN_SECTOR_SHARE`` of the
+    points; of several, the axis the points keep the most even distance from: a tube's
+    axis; a disc's normal, 4 triangles meeting at the centre). ``None`` when none fits."""
+    origin, axes = pca_frame(points)
+    local = (points - origin) @ axes.T
+    if alone and np.unique(_cube_map(local, CLOSED_BINS)).size == 6 * CLOSED_BINS**2:
+        return _cube_map(local)
+    best: tuple[float, NDArray[np.int64] | None] = (np.inf, None)
+    for axis in range(3):
+        others = [k for k in range(3) if k != axis]
+        angle = np.arctan2(local[:, others[1]], local[:, others[0]])
+        cell = np.floor((angle + np.pi) / (np.pi / 2)).astype(np.int64) % 4
+        radial = np.hypot(local[:, others[0]], local[:, others[1]])
+        spread = float(radial.std() / max(float(radial.mean()), 1e-300))
+        if np.bincount(cell, minlength=4).min() >= MIN_SECTOR_SHARE * len(points) and spread < best[0]:
+            best = (spread, cell)
+    return best[1]
+
+
+def _split_cornerless(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport,
+) -> NDArray[np.int64]:
+    """Labels with every segment without corners (a closed surface, a tube, a disc) split
+    by :func:`_sectors`; the input array when there is none."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    out = labels
+    for label, ids in sorted(seg_corners.items()):
+        if len(ids):
+            continue
+        members = np.flatnonzero(labels == label)
+        alone = not any(label in pair for pair in layout.borders)
+        cell = _sectors(points[members], alone)
+        if cell is None:
+            continue
+        cell = np.unique(cell, return_inverse=True)[1].reshape(-1)
+        out = out.copy() if out is labels else out
+        start = int(out.max()) + 1
+        names = [label] + list(range(start, start + int(cell.max())))
+        out[members] = np.asarray(names)[cell]
+        report.pieces[int(label)] = names
+        report.corners[int(label)] = 0
+    return out
 
 
 def split_segments(
@@ -400,6 +503,10 @@ def split_segments(
     report = SplitReport()
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
+    out = _split_cornerless(points, out, layout, tree, report)
+    if out is not labels:
+        layout = build_layout(points, out, check=False)
+        source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
@@ -440,7 +547,26 @@ def split_segments(
         layout = build_layout(points, out, check=False)
     else:
         layout = _drop_kinks(points, out, layout, tree)
+    _check_pieces(layout, tree, out, source, report)
     return out, layout, report
+
+
+def _check_pieces(
+    layout: Layout, tree: cKDTree, labels: NDArray[np.int64], source: dict[int, int],
+    report: SplitReport,
+) -> None:
+    """Raise, naming the input segment, when a piece of a split is still no 3/4-sided region
+    (the message of a later stage would name a label the user never gave)."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    for label, ids in sorted(seg_corners.items()):
+        if label in source and len(ids) not in (3, 4):
+            first = source[label]
+            raise InputError(
+                f"segment {first} has {report.corners[first]} corners; a patch needs 3 or 4 "
+                f"and the automatic split into 3/4-sided pieces left one with {len(ids)} "
+                "(e.g. at a reflex corner, which the layout sees as no corner) — split or "
+                "merge segments by hand so each is a 3- or 4-sided region"
+            )
 
 
 __all__ = ["SplitReport", "best_split", "split_segments"]
