@@ -166,3 +166,35 @@ def test_one_segment_without_corners(tmp_path: Path, shape: str) -> None:
     m = _check(rec, cloud, tmp_path, 1.0)
     assert m["n_faces"] == (4 if shape == "cylinder" else 6)
     assert m["free_edges"] == (8 if shape == "cylinder" else 0)
+
+
+def test_tube_as_two_halves(tmp_path: Path) -> None:
+    """The tube as two halves meeting along two borders (sharing 4 corners, so no edge of
+    theirs is one border): merged, then cut into 4 sectors like a tube given as one
+    segment."""
+    cloud = samples.cylinder(20000, split=(2, 1))
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert rec.splits.merged == {1: 0} and rec.splits.pieces == {0: [0, 2, 3, 4]}
+    assert "segment 1: merged into 0" in rec.splits.summary()
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 4 and m["free_edges"] == 8
+
+
+def test_cli_reports_the_split(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``pde2cad reconstruct`` on a cloud with a merged segment: it writes the STEP and
+    says which segment became which patches (summary line and JSON report)."""
+    import json
+
+    from pde2cad.cli import main
+
+    cloud = samples.sheet(20000)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    np.save(tmp_path / "cloud.npy", np.column_stack([cloud.points, lab]))
+    out, report = tmp_path / "out.step", tmp_path / "report.json"
+    args = [str(tmp_path / "cloud.npy"), "--labels", "column4", "-o", str(out)]
+    assert main(["reconstruct", *args, "--continuity", "c1", "--report", str(report)]) == 0
+    assert "split: segment 0 (not 3- or 4-sided) -> 2 patches 0, 4" in capsys.readouterr().out
+    assert json.loads(report.read_text())["summary"]["splits"] == {"0": [0, 4]}
+    m = measure(read_step(out))
+    assert m["valid"] and m["n_faces"] == 4 and m["max_angle_deg"] <= 1.0

@@ -82,17 +82,22 @@ class SplitReport:
         Per split input label, the labels of its pieces (the first is the label itself).
     corners : dict[int, int]
         Per split input label, how many corners it had.
+    merged : dict[int, int]
+        Input labels merged into another before splitting (two segments meeting along two
+        borders, e.g. the halves of a tube, together a segment without corners).
     """
 
     pieces: dict[int, list[int]] = field(default_factory=dict)
     corners: dict[int, int] = field(default_factory=dict)
+    merged: dict[int, int] = field(default_factory=dict)
 
     def summary(self) -> str:
         """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
-        return "\n".join(
+        lines = [f"segment {b}: merged into {a}" for b, a in sorted(self.merged.items())]
+        return "\n".join(lines + [
             f"segment {label}: {self.corners[label]} corners -> {len(p)} pieces {p}"
             for label, p in sorted(self.pieces.items())
-        )
+        ])
 
 
 def _angle(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
@@ -442,12 +447,34 @@ def _sectors(points: NDArray[np.float64], alone: bool) -> NDArray[np.int64] | No
     return best[1]
 
 
-def _split_cornerless(
+def _merge_tubes(
     points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
     report: SplitReport,
+) -> tuple[NDArray[np.int64], Layout]:
+    """Labels and layout with each pair of neighbours that share more than the 2 corners of
+    one edge merged, when together they form a segment without corners (two halves of a
+    tube meeting along two borders; :func:`_split_cornerless` then cuts the union)."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    for a, b in sorted(layout.borders):
+        if a in report.merged or b in report.merged:
+            continue
+        if len(set(seg_corners[a]) & set(seg_corners[b])) <= 2:
+            continue
+        trial = np.where(labels == b, a, labels)
+        trial_layout = build_layout(points, trial, check=False)
+        if len(filter_corners(trial_layout, tree, trial)[1][a]) == 0:
+            labels, layout = trial, trial_layout
+            report.merged[int(b)] = int(a)
+    return labels, layout
+
+
+def _split_cornerless(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, first_new: int,
 ) -> NDArray[np.int64]:
     """Labels with every segment without corners (a closed surface, a tube, a disc) split
-    by :func:`_sectors`; the input array when there is none."""
+    by :func:`_sectors` (new labels from ``first_new`` up); the input array when there is
+    none."""
     _, seg_corners = filter_corners(layout, tree, labels)
     out = labels
     for label, ids in sorted(seg_corners.items()):
@@ -460,7 +487,7 @@ def _split_cornerless(
             continue
         cell = np.unique(cell, return_inverse=True)[1].reshape(-1)
         out = out.copy() if out is labels else out
-        start = int(out.max()) + 1
+        start = max(int(out.max()) + 1, first_new)
         names = [label] + list(range(start, start + int(cell.max())))
         out[members] = np.asarray(names)[cell]
         report.pieces[int(label)] = names
@@ -503,8 +530,10 @@ def split_segments(
     report = SplitReport()
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
-    out = _split_cornerless(points, out, layout, tree, report)
-    if out is not labels:
+    out, layout = _merge_tubes(points, out, layout, tree, report)
+    merged = out
+    out = _split_cornerless(points, out, layout, tree, report, int(labels.max()) + 1)
+    if out is not merged:
         layout = build_layout(points, out, check=False)
         source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
