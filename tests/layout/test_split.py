@@ -198,3 +198,27 @@ def test_cli_reports_the_split(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert json.loads(report.read_text())["summary"]["splits"] == {"0": [0, 4]}
     m = measure(read_step(out))
     assert m["valid"] and m["n_faces"] == 4 and m["max_angle_deg"] <= 1.0
+
+
+def test_sparse_torus_merge_t_node_read_as_reflex() -> None:
+    """8000 points: a T-node's angle reads up to 231 degrees (the loop is coarse); it must
+    still count as a T-node, not as a reflex corner (an L-shape's inner corner, 270)."""
+    cloud = samples.torus(8000, seed=1)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 16]}
+    assert all(rec.network.regular.values())
+    assert _true_error(rec, cloud) <= 1e-4
+
+
+def test_sphere_face_halved(tmp_path: Path) -> None:
+    """A cube-sphere face cut in two: the cut runs on through the strip of faces around the
+    sphere (4, 5 and the opposite face 1) and closes; the 3-valent cube corners stay."""
+    cloud = samples.sphere6(20000)
+    lab = cloud.labels.copy()
+    lab[(lab == 0) & (cloud.points[:, 1] > 0)] = 9
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert sorted(rec.splits.pieces) == [1, 4, 5]
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 10 and m["free_edges"] == 0
