@@ -2,7 +2,9 @@
 
 Pipeline:
 
-1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners.
+1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners; segments
+   that are no 3/4-sided region are relabelled into pieces that are
+   (:func:`~pde2cad.layout.split.split_segments`, layout built again).
 2. :func:`~pde2cad.layout.edges.build_edges`: refined corners, each segment's side loop, and
    ONE curve per edge (fitted to the border midline of both segments, or to the open-boundary
    run), used by every patch on that edge (reversed where its loop runs the other way), so

@@ -2,26 +2,43 @@
 
 A segmentation made by hand or by region growing rarely gives every segment three or four
 corners: two patches merged give a hexagon, and their neighbours keep the old corner on
-their side (a T-junction, which makes them pentagons). :func:`split_segments` cuts such a
-segment along *chords* between its own corners, so no new corner appears on a side it
-shares with a neighbour (a new point there would be a T-junction of the neighbour in turn,
-and the splitting would spread over the whole surface):
+their side (a T-junction, which makes them pentagons); a tube or a sphere given as one
+segment has no corner at all. :func:`split_segments` relabels the points so that every
+segment becomes 3/4-sided, and builds the layout again: the new seams are ordinary shared
+edges (one curve fitted on the surface, shared ribbons for C1). It works at the label level,
+between :func:`~pde2cad.layout.adjacency.build_layout` and
+:func:`~pde2cad.layout.edges.build_edges`:
 
-1. **Corners in order.** The segment's patch corners (the layout's, minus border kinks, as
-   :func:`~pde2cad.layout.edges.build_edges` keeps them) are ordered along its boundary loop
-   (:attr:`~pde2cad.layout.adjacency.Layout.loops`).
-2. **Chords.** In the segment's PCA plane the corners form a polygon; it is split
-   recursively by chords between corners into pieces of 3 or 4 corners, choosing the split
-   whose pieces' corner angles deviate least from 90 degrees (quads) or 60 (triangles). A
-   T-node (a corner at a straight angle) thus becomes an end of a chord, never the apex of a
-   flat triangle; a 2 x 1 hexagon is cut back into its two squares.
-3. **Relabel.** Each point goes to the piece on its side of the chords (straight lines in the
-   PCA plane through the two corners); the first piece keeps the label, the others get new
-   labels above every label in use. The layout is built again on the new labels, so the new
-   seams are ordinary shared edges (one curve fitted on the surface, shared ribbons for C1).
+1. **Tubes in halves.** Two neighbours sharing more than the 2 corners of one edge (they
+   meet along two borders) are merged when together they have no corner.
+2. **No corners.** A segment without corners that touches nothing and is seen from its
+   centroid in every direction is closed: cut into the 6 faces of a cube map. Otherwise
+   into 4 sectors around the PCA axis it wraps round (a tube's axis; a disc's normal).
+3. **Rounds** (up to ``MAX_ROUNDS``, each on a new layout), for every segment with more than
+   4 corners (the corners :func:`~pde2cad.layout.edges.build_edges` keeps, in the order of
+   its boundary loop):
 
-A piece with fewer than ``MIN_PIECE_POINTS`` points cannot be fitted: an
-:class:`~pde2cad.errors.InputError` names the segment.
+   a. *Corner angles* on the surface, between the directions in which the sides leave a
+      corner (from the boundary loop a little away from the corner, in its tangent plane),
+      signed so that a reflex corner reads over 180 degrees. Border kinks (both sides on the
+      same neighbour, a straight angle) are dropped from the layout: no T-node.
+   b. *Reflex corners* (over ``REFLEX_ANGLE``): cut along the continuations of their sides.
+   c. *A quad with T-nodes* (all but 4 corners at straight angles, ``FLAT_ANGLE``): strip
+      cuts, level sets of coordinates from the shortest-path distances to the 4 sides (so
+      they follow the surface). T-nodes on opposite sides are joined; a lone one is cut
+      straight across, which makes a T-node of the neighbour there, cut in the next round:
+      the cut runs along the strip of quads until it meets an open boundary or closes, and
+      every corner keeps four patches (exact C1).
+   d. *Otherwise* chords between corners, chosen recursively so that the pieces' corner
+      angles deviate least from 90 (quads) or 60 (triangles) degrees; straight cuts in the
+      PCA plane.
+
+A piece with fewer than ``MIN_PIECE_POINTS`` points, or a piece still not 3/4-sided after the
+rounds, raises an :class:`~pde2cad.errors.InputError` naming the input segment.
+
+Limits: the layout must see the corners. An L-shape's reflex corner on a border between two
+segments reads as a border kink, not a corner (the L then stays unsplit, with a message);
+a ring (annulus) has two boundary loops, which the layout's one loop per segment misses.
 """
 
 from __future__ import annotations
