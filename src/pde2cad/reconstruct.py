@@ -5,7 +5,9 @@ Two stages, split at the CAD kernel:
 - :func:`fit_surfaces` (numpy/scipy only, runs inside FreeCAD's Python too) makes the
   kernel-neutral :class:`SurfaceModel`:
 
-  1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners.
+  1. :func:`~pde2cad.layout.build_layout`: adjacency, border points, rough corners; segments
+     that are no 3/4-sided region are relabelled into pieces that are
+     (:func:`~pde2cad.layout.split.split_segments`, layout built again).
   2. :func:`~pde2cad.layout.edges.build_edges`: refined corners, each segment's side loop, and
      ONE curve per edge (fitted to the border midline of both segments, or to the open-boundary
      run), used by every patch on that edge (reversed where its loop runs the other way), so
@@ -40,6 +42,7 @@ from pde2cad.io.clouds import as_labels
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
+from pde2cad.layout.split import SplitReport, split_segments
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
 
@@ -105,6 +108,9 @@ class SurfaceModel:
         see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
     timings : dict[str, float]
         Seconds per stage.
+    splits : SplitReport
+        The input segments split into 3/4-sided pieces (:mod:`pde2cad.layout.split`) and
+        their pieces' labels (the keys of ``patches``).
     frame : Frame
         The centred, normalised frame the fit ran in (``local = (world - centre) / scale``).
     """
@@ -120,6 +126,7 @@ class SurfaceModel:
     diagonal: float
     c0_fallback: list[int] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    splits: SplitReport = field(default_factory=SplitReport)
     frame: Frame | None = None
 
     @property
@@ -138,7 +145,7 @@ class Reconstruction:
     shape : TopoDS_Shape
         Sewn shell (or solid when closed).
     patches, surfaces, labels, layout, edges, edge_errors, corners, diagonal, timings,
-    network, c0_fallback
+    network, c0_fallback, splits
         As in :class:`SurfaceModel`.
     faces : list of TopoDS_Face
         One face per segment, in ``labels`` order.
@@ -159,6 +166,7 @@ class Reconstruction:
     timings: dict[str, float] = field(default_factory=dict)
     network: EdgeNetwork | None = None
     c0_fallback: list[int] = field(default_factory=list)
+    splits: SplitReport = field(default_factory=SplitReport)
 
     def write_step(self, path: str | Path, units: str = "MM", **options: Any) -> Path:
         """Write the sewn shape to a STEP file (options: see :func:`pde2cad.occ.write_step`)."""
@@ -280,8 +288,9 @@ def _check_options(m: object, n: object, continuity: str, tolerance: float | Non
 def _build_network(
     pts: NDArray[np.float64], lab: NDArray[np.int64], continuity: str,
     timings: dict[str, float], progress: Progress | None,
-) -> tuple[Layout, EdgeNetwork]:
-    """Steps 1-2 of :func:`fit_surfaces`: the layout, then the edge network."""
+) -> tuple[NDArray[np.int64], Layout, EdgeNetwork, SplitReport]:
+    """Steps 1-2 of :func:`fit_surfaces`: the layout (segments that are no 3/4-sided
+    region relabelled into pieces), then the edge network; returns the piece labels too."""
     t0 = time.perf_counter()
     _report(progress, "layout", 0, 1)
     layout = build_layout(pts, lab, check=False)
@@ -290,6 +299,8 @@ def _build_network(
     tree = getattr(layout, "tree", None)
     if tree is None:
         tree = cKDTree(pts, balanced_tree=False)
+    # Segments with 5+ corners (merged patches, T-junctions) -> 3/4-sided pieces, new labels.
+    lab, layout, splits = split_segments(pts, lab, layout, tree)
     timings["layout"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -299,7 +310,7 @@ def _build_network(
         # 3-sided patches: put their apex where a C1 pole can form (e.g. triangles around it).
         network = apex_first(network)
     timings["edges"] = time.perf_counter() - t0
-    return layout, network
+    return lab, layout, network, splits
 
 
 def _fit_c1(
@@ -394,7 +405,8 @@ def fit_surfaces(
     ----------
     points : (N, 3) float
     labels : (N,) int
-        One segment label per point; every segment must be a 3- or 4-sided region.
+        One segment label per point. A segment with more than 4 corners (merged patches, a
+        neighbour's corner on its side) is split into 3/4-sided pieces, see ``splits``.
     m, n : int or "auto"
         Deformation terms per patch (see :func:`~pde2cad.surfaces.patch.fit_patch`).
         ``"auto"`` (default): per patch, the ``M = N`` that best predicts held-out points
@@ -425,7 +437,7 @@ def fit_surfaces(
     frame = Frame.of(world)
     pts = frame.to_local(world)
     timings: dict[str, float] = {}
-    layout, network = _build_network(pts, lab, continuity, timings, progress)
+    lab, layout, network, splits = _build_network(pts, lab, continuity, timings, progress)
 
     t0 = time.perf_counter()
     try:
@@ -454,7 +466,7 @@ def fit_surfaces(
         surfaces=surfaces, labels=sorted(patches), patches=world_patches, network=world_net,
         layout=frame.layout(layout), edges=world_net.curves,
         edge_errors=world_net.errors, corners=world_net.corners, diagonal=frame.scale,
-        c0_fallback=fallback, timings=timings, frame=frame,
+        c0_fallback=fallback, timings=timings, splits=splits, frame=frame,
     )
 
 
@@ -495,4 +507,5 @@ def reconstruct(
         labels=model.labels, sew_info=info, layout=model.layout, edges=model.edges,
         edge_errors=model.edge_errors, corners=model.corners, diagonal=model.diagonal,
         timings=timings, network=model.network, c0_fallback=model.c0_fallback,
+        splits=model.splits,
     )

@@ -235,6 +235,14 @@ def build_report(
         "faces_matched": bool(matched),
         "face_match_distance": float(worst),
         "c0_fallback": sorted(int(label) for label in getattr(rec, "c0_fallback", None) or []),
+        "splits": {
+            str(label): [int(p) for p in pieces]
+            for label, pieces in getattr(getattr(rec, "splits", None), "pieces", {}).items()
+        },
+        "merged": {
+            str(b): int(a)
+            for b, a in getattr(getattr(rec, "splits", None), "merged", {}).items()
+        },
         **_corner_summary(network, corners, split, worst_corner, diagonal),
     }
     all_timings = {k: float(v) for k, v in getattr(rec, "timings", {}).items()}
@@ -388,6 +396,13 @@ def summary_lines(report: Mapping[str, Any]) -> list[str]:
         lines.append(
             "note: read-back edge ends could not all be matched to network corners "
             f"(off by {s['corner_match_distance']:.3g}); the near-corner split may be off"
+        )
+    for label, into in (s.get("merged") or {}).items():
+        lines.append(f"split: segment {label} merged into {into} (they meet along two borders)")
+    for label, pieces in (s.get("splits") or {}).items():
+        lines.append(
+            f"split: segment {label} (not 3- or 4-sided) -> {len(pieces)} patches "
+            f"{', '.join(map(str, pieces))}"
         )
     fallback = s.get("c0_fallback") or []
     if fallback:

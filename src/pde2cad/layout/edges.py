@@ -53,6 +53,12 @@ SPAN_CHOICES = (1, 2, 4, 8, 16)
 SPAN_SAMPLE = 1500
 #: Fewest data points per span.
 POINTS_PER_SPAN = 6
+#: A corner is an end of an open run when the segment's open-boundary loop passes within
+#: OPEN_REACH x the gap (CLUSTER_FACTOR x radius) of it: a noisy tube cut into sectors rotated
+#: off the sampling axes had a rim corner at 1.0004 x the gap from its sparse loop (its open
+#: edge went missing). Below BORDER_SPAN / CLUSTER_FACTOR = 1.6: a corner that far from the
+#: open boundary lies a border's length inside.
+OPEN_REACH = 1.25
 #: Closest-point reparameterization rounds per fit.
 REPARAM_ROUNDS = 3
 #: Border data closer than this many neighbour radii to a rough corner is ignored by the
@@ -180,7 +186,7 @@ def key_of(a: int, b: int) -> Key:
 
 
 # --------------------------------------------------------------------------- topology
-def _filter_corners(
+def filter_corners(
     layout: Layout, tree: cKDTree, labels: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], dict[int, list[int]]]:
     """Drop border kinks (two segments, no open boundary near); renumber the corners."""
@@ -214,11 +220,12 @@ def _open_runs(
     boundary: NDArray[np.float64], corner_xyz: NDArray[np.float64], corner_ids: list[int],
     gap: float,
 ) -> list[tuple[int, int, NDArray[np.float64]]]:
-    """Runs of a segment's open-boundary loop between consecutive corners near it."""
+    """Runs of a segment's open-boundary loop between consecutive corners near it (within
+    ``OPEN_REACH x gap``: the loop can be sparse at a rim corner)."""
     if len(boundary) < 2:
         return []
     dist, where = cKDTree(boundary).query(corner_xyz)
-    near = dist <= gap
+    near = dist <= OPEN_REACH * gap
     if near.sum() < 2:
         return []
     ids = np.asarray(corner_ids)[near]
@@ -490,7 +497,7 @@ def build_edges(
     lab = np.asarray(labels).astype(np.int64)
     tree = cKDTree(pts) if tree is None else tree
     radius, spacing = layout.radius, layout.spacing
-    corners, seg_corners = _filter_corners(layout, tree, lab)
+    corners, seg_corners = filter_corners(layout, tree, lab)
     for label, ids in seg_corners.items():
         if len(ids) not in (3, 4):
             raise InputError(

@@ -1,0 +1,624 @@
+"""Split segments that are no 3- or 4-sided region into 3/4-sided sub-segments.
+
+A segmentation made by hand or by region growing rarely gives every segment three or four
+corners: two patches merged give a hexagon, and their neighbours keep the old corner on
+their side (a T-junction, which makes them pentagons); a tube or a sphere given as one
+segment has no corner at all. :func:`split_segments` relabels the points so that every
+segment becomes 3/4-sided, and builds the layout again: the new seams are ordinary shared
+edges (one curve fitted on the surface, shared ribbons for C1). It works at the label level,
+between :func:`~pde2cad.layout.adjacency.build_layout` and
+:func:`~pde2cad.layout.edges.build_edges`:
+
+1. **Tubes in halves.** Two neighbours sharing more than the 2 corners of one edge (they
+   meet along two borders) are merged when together they have no corner.
+2. **No corners.** A segment without corners that touches nothing and is seen from its
+   centroid in every direction is closed: cut into the 6 faces of a cube map. Otherwise
+   into 4 sectors around the PCA axis it wraps round (a tube's axis; a disc's normal).
+3. **Rounds** (up to ``MAX_ROUNDS``, each on a new layout), for every segment with more than
+   4 corners (the corners :func:`~pde2cad.layout.edges.build_edges` keeps, in the order of
+   its boundary loop):
+
+   a. *Corner angles* on the surface, between the directions in which the sides leave a
+      corner (from the boundary loop a little away from the corner, in its tangent plane),
+      signed so that a reflex corner reads over 180 degrees. Border kinks (both sides on the
+      same neighbour, a straight angle) are dropped from the layout: no T-node.
+   b. *Reflex corners* (over ``REFLEX_ANGLE``): cut along the continuations of their sides.
+   c. *A quad with T-nodes* (all but 4 corners at straight angles, ``FLAT_ANGLE``): strip
+      cuts, level sets of coordinates from the shortest-path distances to the 4 sides (so
+      they follow the surface). T-nodes on opposite sides are joined; a lone one is cut
+      straight across, which makes a T-node of the neighbour there, cut in the next round:
+      the cut runs along the strip of quads until it meets an open boundary or closes, and
+      every corner keeps four patches (exact C1).
+   d. *Otherwise* chords between corners, chosen recursively so that the pieces' corner
+      angles deviate least from 90 (quads) or 60 (triangles) degrees; straight cuts in the
+      PCA plane.
+
+A piece with fewer than ``MIN_PIECE_POINTS`` points, or a piece still not 3/4-sided after the
+rounds, raises an :class:`~pde2cad.errors.InputError` naming the input segment.
+
+Limits: the layout must see the corners. An L-shape's reflex corner on a border between two
+segments reads as a border kink, not a corner (the L then stays unsplit, with a message);
+a ring (annulus) has two boundary loops, which the layout's one loop per segment misses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from pde2cad.errors import InputError
+from pde2cad.layout.adjacency import Layout, build_layout
+from pde2cad.layout.edges import filter_corners
+from pde2cad.surfaces.region import pca_frame
+
+#: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
+MIN_PIECE_POINTS = 50
+#: Largest corner count split (the recursion tries every chord of every piece).
+MAX_CORNERS = 12
+#: Corner normals: PCA of the segment's points within this many neighbour radii.
+CORNER_REACH = 4.0
+#: Side directions at a corner: from LOOP_FROM to LOOP_TO x CORNER_REACH of loop arc away.
+LOOP_FROM = 0.5
+LOOP_TO = 1.5
+#: A corner whose sides leave it at this angle or more (degrees) is a T-node (a neighbour's
+#: corner on a straight side). Measured: T-nodes 150-178, real corners of torus patches
+#: 65-125.
+FLAT_ANGLE = 145.0
+#: Neighbours per point of the graph whose shortest paths measure distances on the surface.
+GRAPH_NEIGHBOURS = 8
+#: Neighbours per side point that tell which segment lies across a side.
+SIDE_NEIGHBOURS = 12
+#: A segment without corners is cut into sectors only when each holds this share of it.
+MIN_SECTOR_SHARE = 0.05
+#: A segment without neighbours is closed when seen from its centroid in every cell of a
+#: CLOSED_BINS x CLOSED_BINS grid on each cube-map face (a tube leaves its end faces empty).
+CLOSED_BINS = 4
+#: Corners above this angle (degrees) are reflex (an L-shape's inner corner: 270); between
+#: FLAT_ANGLE and it, T-nodes (sparse random samples: a T-node measured 231 at 8000 points
+#: on a torus).
+REFLEX_ANGLE = 245.0
+#: A corner is reflex when the loop turns clockwise there about a normal within
+#: arccos(REFLEX_COS) of the (counter-clockwise oriented) PCA normal.
+REFLEX_COS = 0.5
+#: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
+MAX_ROUNDS = 6
+#: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
+IDEAL_ANGLE = {3: 60.0, 4: 90.0}
+
+
+@dataclass(frozen=True)
+class SplitReport:
+    """What :func:`split_segments` did.
+
+    Attributes
+    ----------
+    pieces : dict[int, list[int]]
+        Per split input label, the labels of its pieces (the first is the label itself).
+    corners : dict[int, int]
+        Per split input label, how many corners it had.
+    merged : dict[int, int]
+        Input labels merged into another before splitting (two segments meeting along two
+        borders, e.g. the halves of a tube, together a segment without corners).
+    """
+
+    pieces: dict[int, list[int]] = field(default_factory=dict)
+    corners: dict[int, int] = field(default_factory=dict)
+    merged: dict[int, int] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
+        lines = [f"segment {b}: merged into {a}" for b, a in sorted(self.merged.items())]
+        return "\n".join(lines + [
+            f"segment {label}: {self.corners[label]} corners -> {len(p)} pieces {p}"
+            for label, p in sorted(self.pieces.items())
+        ])
+
+
+def _angle(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Angle (degrees) between two vectors."""
+    cos = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-300)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def best_split(directions: dict[tuple[int, int], NDArray[np.float64]], n: int) -> list[tuple[int, ...]]:
+    """Pieces (tuples of corner positions ``0 .. n - 1`` in loop order) of 3 or 4 corners.
+
+    Step 2 of the module docstring: recursive chords, cost = the largest deviation of a
+    piece's corner angle from its ideal. ``directions[(i, j)]`` is the direction in which
+    the side or chord from corner ``i`` to corner ``j`` leaves ``i`` (in its tangent plane);
+    a polygon of 3 or 4 corners is one piece.
+    """
+
+    def cost(ids: tuple[int, ...]) -> float:
+        k = len(ids)
+        dev = [
+            abs(_angle(directions[(ids[s], ids[s - 1])], directions[(ids[s], ids[(s + 1) % k])])
+                - IDEAL_ANGLE[k])
+            for s in range(k)
+        ]
+        return max(dev)
+
+    @lru_cache(maxsize=None)
+    def solve(ids: tuple[int, ...]) -> tuple[float, tuple[tuple[int, ...], ...]]:
+        if len(ids) in IDEAL_ANGLE:
+            return cost(ids), (ids,)
+        best: tuple[float, tuple[tuple[int, ...], ...]] = (np.inf, ())
+        m = len(ids)
+        for i in range(m):
+            for j in range(i + 2, m):
+                if i == 0 and j == m - 1:
+                    continue
+                ca, pa = solve(ids[i : j + 1])
+                if ca >= best[0]:
+                    continue
+                cb, pb = solve(ids[j:] + ids[: i + 1])
+                if max(ca, cb) < best[0]:
+                    best = (max(ca, cb), pa + pb)
+        return best
+
+    return list(solve(tuple(range(n)))[1])
+
+
+def _directions(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64],
+    axis: NDArray[np.float64], reach: float,
+) -> dict[tuple[int, int], NDArray[np.float64]]:
+    """Directions leaving each corner (``xyz``, in loop order) towards every other corner, in
+    its tangent plane (PCA of the segment's ``points`` within ``reach``).
+
+    To its loop neighbours: along the boundary loop, from the loop point ``LOOP_FROM x
+    reach`` of arc away to the one ``LOOP_TO x reach`` away (at most a quarter and half of
+    the way to them): not from the corner itself, which may lie up to a neighbour radius off
+    its sides (that tilted a T-node's straight angle to ~150 degrees), and not far along a
+    curved side (a chord over it turns with the side). To the others: along the cut that
+    :func:`_assign_pieces` makes, the surface's intersection with the plane through both
+    corners and the segment's PCA normal ``axis``."""
+    n = len(xyz)
+    _, at = cKDTree(loop).query(xyz)
+    tree = cKDTree(points)
+    out: dict[tuple[int, int], NDArray[np.float64]] = {}
+    for i in range(n):
+        near = points[tree.query_ball_point(xyz[i], reach)]
+        if len(near) < 3:
+            near = points[tree.query(xyz[i], k=min(len(points), 12))[1]]
+        normal = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1]
+        for j in range(n):
+            if j == i:
+                continue
+            if j in ((i + 1) % n, (i - 1) % n):
+                sign = 1 if j == (i + 1) % n else -1
+                run = (np.arange(len(loop)) * sign + at[i]) % len(loop)
+                stop = int(np.flatnonzero(run == at[j])[0])
+                path = loop[run[: stop + 1]]
+                arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
+                lo = min(int(np.searchsorted(arc, LOOP_FROM * reach)), stop // 4)
+                hi = max(min(int(np.searchsorted(arc, LOOP_TO * reach)), stop // 2), lo + 1)
+                d = path[hi] - path[lo]
+            else:
+                d = np.cross(normal, np.cross(xyz[j] - xyz[i], axis))
+                if d @ (xyz[j] - xyz[i]) < 0:
+                    d = -d
+            out[(i, j)] = d - (d @ normal) * normal
+    return out
+
+
+def _ordered_corners(
+    layout: Layout, points: NDArray[np.float64], label: int, ids: list[int], corners: NDArray[np.float64]
+) -> list[int]:
+    """The segment's corner ids in the order of its boundary loop."""
+    loop = points[layout.loops[label]]
+    _, where = cKDTree(loop).query(corners[ids])
+    return [ids[k] for k in np.argsort(where, kind="stable")]
+
+
+def _assign_pieces(
+    uv: NDArray[np.float64], poly: NDArray[np.float64], pieces: list[tuple[int, ...]]
+) -> NDArray[np.int64]:
+    """Index of the piece each point (uv, (P, 2)) falls in: for every piece, the chords
+    bounding it are lines through two of its corners; a point belongs to the piece on whose
+    inner side of all its chords it lies (ties to the piece with the smallest violation)."""
+    violation = np.zeros((len(uv), len(pieces)))
+    chord_set = _chords(pieces)
+    for p, piece in enumerate(pieces):
+        inner = poly[list(piece)].mean(axis=0)
+        k = len(piece)
+        for s in range(k):
+            a, b = piece[s], piece[(s + 1) % k]
+            if (min(a, b), max(a, b)) not in chord_set:
+                continue
+            d = poly[b] - poly[a]
+            normal = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300)
+            if (inner - poly[a]) @ normal < 0:
+                normal = -normal
+            violation[:, p] += np.maximum(0.0, -(uv - poly[a]) @ normal)
+    return np.argmin(violation, axis=1)
+
+
+def _chords(pieces: list[tuple[int, ...]]) -> set[tuple[int, int]]:
+    """Piece sides used by two pieces (the cuts)."""
+    count: dict[tuple[int, int], int] = {}
+    for piece in pieces:
+        for s in range(len(piece)):
+            a, b = piece[s], piece[(s + 1) % len(piece)]
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+    return {key for key, c in count.items() if c > 1}
+
+
+def _side_distances(
+    points: NDArray[np.float64], loop: NDArray[np.float64], at: NDArray[np.int64],
+    real: NDArray[np.int64],
+) -> NDArray[np.float64]:
+    """(4, P) distances along the surface (shortest paths in the k-NN graph of ``points``)
+    from each point to each side of a quad: side k is the boundary loop from corner
+    ``real[k]`` to ``real[k + 1]`` (``at``: the corners' loop indices)."""
+    n = len(loop)
+    k = min(GRAPH_NEIGHBOURS + 1, len(points))
+    tree = cKDTree(points)
+    dist, idx = tree.query(points, k=k)
+    rows = np.repeat(np.arange(len(points)), k - 1)
+    graph = coo_matrix((dist[:, 1:].ravel(), (rows, idx[:, 1:].ravel())), shape=(len(points),) * 2)
+    graph = graph.tocsr().maximum(graph.T.tocsr())
+    _, nearest = tree.query(loop)
+    out = np.empty((4, len(points)))
+    for side in range(4):
+        i0, i1 = at[real[side]], at[real[(side + 1) % 4]]
+        run = np.arange(i0, i1 + (n if i1 < i0 else 0) + 1) % n
+        out[side] = dijkstra(graph, indices=np.unique(nearest[run]), min_only=True)
+    finite = np.isfinite(out)
+    return np.where(finite, out, out[finite].max() if finite.any() else 0.0)
+
+
+def _strip_cells(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64],
+    real: NDArray[np.int64], flat: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Cell of each of a quad's ``points`` after its strip cuts (``flat``: T-node positions,
+    ``real``: the 4 other corners, in loop order).
+
+    Coordinates from the distances to the sides: ``a = d3 / (d3 + d1)`` runs along sides 0
+    and 2, ``b = d0 / (d0 + d2)`` along sides 1 and 3. A T-node on side 0 or 2 cuts along
+    ``a`` = const; joined to a T-node on the opposite side (when both sides have as many,
+    in order), ``a`` blends linearly in ``b`` between their values. Otherwise it runs
+    straight across and makes a T-node of the neighbour on the opposite side, split in the
+    next round: the cut runs along the strip of quads until it meets an open boundary or
+    closes. T-nodes on sides 1 and 3 cut likewise along ``b``. The cell is the number of
+    cuts of each direction a point lies beyond."""
+    _, at = cKDTree(loop).query(xyz)
+    d = _side_distances(points, loop, at, real)
+    a = d[3] / np.maximum(d[3] + d[1], 1e-300)
+    b = d[0] / np.maximum(d[0] + d[2], 1e-300)
+    _, t_at = cKDTree(points).query(xyz[flat])
+    side_of: dict[int, list[int]] = {}
+    for row in np.atleast_1d(t_at):
+        side_of.setdefault(int(np.argmin(d[:, row])), []).append(int(row))
+    cell = np.zeros(len(points), dtype=np.int64)
+    for k, (along, across) in enumerate(((a, b), (b, 1.0 - a))):
+        mine = sorted(float(along[r]) for r in side_of.get(k, []))
+        theirs = sorted(float(along[r]) for r in side_of.get(k + 2, []))
+        if len(mine) == len(theirs):
+            pairs = list(zip(mine, theirs))
+        else:
+            pairs = [(v, v) for v in mine + theirs]
+        beyond = np.zeros(len(points), dtype=np.int64)
+        for v0, v1 in pairs:
+            beyond += along > v0 + (v1 - v0) * across
+        cell = cell * (len(pairs) + 1) + beyond
+    return cell
+
+
+def _corner_angles(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
+) -> tuple[dict[tuple[int, int], NDArray[np.float64]], NDArray[np.float64]]:
+    """:func:`_directions` of a segment's corners and each corner's interior angle between
+    its sides, 0-360 degrees (over 180 at a reflex corner: the loop turns clockwise there
+    about the PCA normal oriented so that the loop runs counter-clockwise)."""
+    origin, axes = pca_frame(points)
+    directions = _directions(points, loop, xyz, axes[2], reach)
+    uv = (loop - origin) @ axes[:2].T
+    area = float(np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1]))
+    normal = axes[2] if area >= 0 else -axes[2]
+    n = len(xyz)
+    angle = np.empty(n)
+    for i in range(n):
+        back, ahead = directions[(i, (i - 1) % n)], directions[(i, (i + 1) % n)]
+        angle[i] = _angle(back, ahead)
+        turn = np.cross(-back, ahead)
+        # Only where the corner's tangent plane is near the PCA plane (the sign means
+        # nothing where a wide segment turns away from it, e.g. the ends of a half-tube).
+        if float(normal @ turn) < -REFLEX_COS * float(np.linalg.norm(turn)):
+            angle[i] = 360.0 - angle[i]
+    return directions, angle
+
+
+def _reflex_cells(
+    points: NDArray[np.float64], xyz: NDArray[np.float64],
+    directions: dict[tuple[int, int], NDArray[np.float64]], reflex: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Cells of a segment cut by the continuations of both sides of each reflex corner
+    (lines in its PCA plane): an L-shape becomes three quads."""
+    origin, axes = pca_frame(points)
+    xy = (points - origin) @ axes[:2].T
+    n = len(xyz)
+    cell = np.zeros(len(points), dtype=np.int64)
+    for r in reflex:
+        at = (xyz[r] - origin) @ axes[:2].T
+        for j in ((r - 1) % n, (r + 1) % n):
+            d = directions[(r, j)] @ axes[:2].T
+            side = (xy - at) @ np.array([-d[1], d[0]]) > 0
+            cell = 2 * cell + side
+    return cell
+
+
+def _split_one(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
+) -> NDArray[np.int64]:
+    """Piece index (0, 1, ...) of each of a segment's ``points``, given its boundary ``loop``
+    and corners ``xyz`` in loop order: cuts from reflex corners first, then strip cuts for
+    a quad with T-nodes, chords otherwise."""
+    directions, angle = _corner_angles(points, loop, xyz, reach)
+    flat = np.flatnonzero((angle >= FLAT_ANGLE) & (angle <= REFLEX_ANGLE))
+    reflex = np.flatnonzero(angle > REFLEX_ANGLE)
+    if len(reflex):
+        cell = _reflex_cells(points, xyz, directions, reflex)
+        if len(np.unique(cell)) > 1:
+            return np.unique(cell, return_inverse=True)[1].reshape(-1)
+    if len(xyz) - len(flat) == 4:
+        cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
+    else:
+        origin, axes = pca_frame(points)
+        poly = (xyz - origin) @ axes[:2].T
+        cell = _assign_pieces((points - origin) @ axes[:2].T, poly, best_split(directions, len(xyz)))
+    return np.unique(cell, return_inverse=True)[1].reshape(-1)
+
+
+def _side_labels(
+    points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, loop: NDArray[np.int64],
+    at: NDArray[np.int64], label: int, reach: float,
+) -> list[int]:
+    """The neighbour along each side of a segment (its loop, point indices, from corner
+    loop index ``at[i]`` to ``at[i + 1]``): the most common other label within ``reach`` of
+    the side's middle half, -1 for an open side."""
+    out = []
+    n = len(loop)
+    for i in range(len(at)):
+        i0, i1 = at[i], at[(i + 1) % len(at)]
+        run = np.arange(i0, i1 + (n if i1 <= i0 else 0) + 1) % n
+        run = run[len(run) // 4 : max(len(run) // 4 + 1, 3 * len(run) // 4)]
+        _, idx = tree.query(points[loop[run]], k=SIDE_NEIGHBOURS, distance_upper_bound=reach)
+        hit = labels[idx[idx < len(points)]]
+        hit = hit[hit != label]
+        out.append(int(np.bincount(hit - hit.min()).argmax() + hit.min()) if hit.size else -1)
+    return out
+
+
+def _drop_kinks(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree
+) -> Layout:
+    """The layout without corners that are kinks of a border: a corner of a segment with
+    more than 4 corners at a straight angle whose two sides border the same neighbour (a
+    wide segment's projection can make the layout see turns along a smooth border; a T-node
+    lies between two different neighbours)."""
+    corners, seg_corners = filter_corners(layout, tree, labels)
+    kinks: set[int] = set()
+    for label, ids in seg_corners.items():
+        if len(ids) <= 4:
+            continue
+        order = _ordered_corners(layout, points, label, ids, corners)
+        loop = layout.loops[label]
+        members = points[labels == label]
+        _, angle = _corner_angles(members, points[loop], corners[order], CORNER_REACH * layout.radius)
+        _, at = cKDTree(points[loop]).query(corners[order])
+        sides = _side_labels(points, labels, tree, loop, at, label, CORNER_REACH * layout.radius)
+        for i in range(len(order)):
+            if sides[i - 1] == sides[i] >= 0 and FLAT_ANGLE <= angle[i] <= REFLEX_ANGLE:
+                kinks.add(order[i])
+    if not kinks:
+        return layout
+    drop = {int(np.flatnonzero((layout.corners == corners[c]).all(axis=1))[0]) for c in kinks}
+    keep = np.array([i not in drop for i in range(len(layout.corners))])
+    new_id = np.cumsum(keep) - 1
+    return dataclasses.replace(
+        layout,
+        corners=layout.corners[keep],
+        segment_corners={
+            label: new_id[[i for i in ids if keep[i]]].astype(np.int64)
+            for label, ids in layout.segment_corners.items()
+        },
+        open_corners=None if layout.open_corners is None else layout.open_corners[keep],
+    )
+
+
+def _cube_map(local: NDArray[np.float64], bins: int = 1) -> NDArray[np.int64]:
+    """Cube-map cell of each direction (rows of ``local``): its face (6) times a ``bins`` x
+    ``bins`` grid on that face."""
+    big = np.argmax(np.abs(local), axis=1)
+    top = local[np.arange(len(local)), big]
+    face = 2 * big + (top > 0)
+    rest = np.stack([local[np.arange(len(local)), (big + k) % 3] for k in (1, 2)], axis=1)
+    grid = np.clip(((rest / np.abs(top)[:, None] + 1) / 2 * bins).astype(np.int64), 0, bins - 1)
+    return (face * bins + grid[:, 0]) * bins + grid[:, 1]
+
+
+def _sectors(points: NDArray[np.float64], alone: bool) -> NDArray[np.int64] | None:
+    """Pieces of a segment without corners. Closed (``alone``: no neighbour, and points seen
+    from the centroid in every one of the ``CLOSED_BINS``^2 cells of each cube-map face): the
+    6 faces of a cube around its centroid (cube map in its PCA frame). Otherwise 4 sectors
+    around the PCA axis it wraps round (every sector holds ``MIN_SECTOR_SHARE`` of the
+    points; of several, the axis the points keep the most even distance from: a tube's
+    axis; a disc's normal, 4 triangles meeting at the centre). ``None`` when none fits."""
+    origin, axes = pca_frame(points)
+    local = (points - origin) @ axes.T
+    if alone and np.unique(_cube_map(local, CLOSED_BINS)).size == 6 * CLOSED_BINS**2:
+        return _cube_map(local)
+    best: tuple[float, NDArray[np.int64] | None] = (np.inf, None)
+    for axis in range(3):
+        others = [k for k in range(3) if k != axis]
+        angle = np.arctan2(local[:, others[1]], local[:, others[0]])
+        cell = np.floor((angle + np.pi) / (np.pi / 2)).astype(np.int64) % 4
+        radial = np.hypot(local[:, others[0]], local[:, others[1]])
+        spread = float(radial.std() / max(float(radial.mean()), 1e-300))
+        if np.bincount(cell, minlength=4).min() >= MIN_SECTOR_SHARE * len(points) and spread < best[0]:
+            best = (spread, cell)
+    return best[1]
+
+
+def _merge_tubes(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport,
+) -> tuple[NDArray[np.int64], Layout]:
+    """Labels and layout with each pair of neighbours that share more than the 2 corners of
+    one edge merged, when together they form a segment without corners (two halves of a
+    tube meeting along two borders; :func:`_split_cornerless` then cuts the union)."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    for a, b in sorted(layout.borders):
+        if a in report.merged or b in report.merged:
+            continue
+        if len(set(seg_corners[a]) & set(seg_corners[b])) <= 2:
+            continue
+        trial = np.where(labels == b, a, labels)
+        trial_layout = build_layout(points, trial, check=False)
+        if len(filter_corners(trial_layout, tree, trial)[1][a]) == 0:
+            labels, layout = trial, trial_layout
+            report.merged[int(b)] = int(a)
+    return labels, layout
+
+
+def _split_cornerless(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, first_new: int,
+) -> NDArray[np.int64]:
+    """Labels with every segment without corners (a closed surface, a tube, a disc) split
+    by :func:`_sectors` (new labels from ``first_new`` up); the input array when there is
+    none."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    out = labels
+    for label, ids in sorted(seg_corners.items()):
+        if len(ids):
+            continue
+        members = np.flatnonzero(labels == label)
+        alone = not any(label in pair for pair in layout.borders)
+        cell = _sectors(points[members], alone)
+        if cell is None:
+            continue
+        cell = np.unique(cell, return_inverse=True)[1].reshape(-1)
+        out = out.copy() if out is labels else out
+        start = max(int(out.max()) + 1, first_new)
+        names = [label] + list(range(start, start + int(cell.max())))
+        out[members] = np.asarray(names)[cell]
+        report.pieces[int(label)] = names
+        report.corners[int(label)] = 0
+    return out
+
+
+def split_segments(
+    points: NDArray[np.float64],
+    labels: NDArray[np.int64],
+    layout: Layout,
+    tree: cKDTree,
+) -> tuple[NDArray[np.int64], Layout, SplitReport]:
+    """Split every segment with more than 4 corners into 3/4-sided pieces (in up to
+    ``MAX_ROUNDS`` rounds: a strip cut makes a T-node on the next segment of the strip).
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    labels : (N,) int
+    layout : Layout
+        :func:`~pde2cad.layout.adjacency.build_layout` of ``points``, ``labels``.
+    tree : cKDTree
+        Of ``points``.
+
+    Returns
+    -------
+    labels : (N,) int
+        The new labels (the input array when nothing is split).
+    layout : Layout
+        The layout of the new labels (the input one when nothing is split).
+    report : SplitReport
+
+    Raises
+    ------
+    InputError
+        A piece of a split segment with fewer than ``MIN_PIECE_POINTS`` points, or a segment
+        with more than ``MAX_CORNERS`` corners (the message names the label).
+    """
+    report = SplitReport()
+    out = labels
+    source: dict[int, int] = {}  # piece label -> input label
+    out, layout = _merge_tubes(points, out, layout, tree, report)
+    merged = out
+    out = _split_cornerless(points, out, layout, tree, report, int(labels.max()) + 1)
+    if out is not merged:
+        layout = build_layout(points, out, check=False)
+        source = {p: first for first, pieces in report.pieces.items() for p in pieces}
+    for _ in range(MAX_ROUNDS):
+        layout = _drop_kinks(points, out, layout, tree)
+        corners, seg_corners = filter_corners(layout, tree, out)
+        todo = [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4]
+        if not todo:
+            break
+        out = out.copy()
+        next_label = int(out.max()) + 1
+        for label, ids in todo:
+            first = source.get(label, label)
+            if len(ids) > MAX_CORNERS:
+                raise InputError(
+                    f"segment {first} has {len(ids)} corners (at most {MAX_CORNERS} are split "
+                    "automatically); split it into smaller segments"
+                )
+            members = np.flatnonzero(out == label)
+            order = _ordered_corners(layout, points, label, ids, corners)
+            which = _split_one(
+                points[members], points[layout.loops[label]], corners[order],
+                CORNER_REACH * layout.radius,
+            )
+            counts = np.bincount(which)
+            if counts.min() < MIN_PIECE_POINTS:
+                raise InputError(
+                    f"segment {first} has {len(ids)} corners and splitting it into 3/4-sided "
+                    f"pieces leaves one with {int(counts.min())} points (need "
+                    f"{MIN_PIECE_POINTS}); sample the surface more densely or split that "
+                    "segment by hand"
+                )
+            names = [label] + list(range(next_label, next_label + len(counts) - 1))
+            next_label += len(counts) - 1
+            out[members] = np.asarray(names)[which]
+            pieces = report.pieces.setdefault(first, [first])
+            pieces += [n for n in names[1:]]
+            report.corners.setdefault(first, len(ids))
+            for name in names:
+                source[name] = first
+        layout = build_layout(points, out, check=False)
+    else:
+        layout = _drop_kinks(points, out, layout, tree)
+    _check_pieces(layout, tree, out, source, report)
+    return out, layout, report
+
+
+def _check_pieces(
+    layout: Layout, tree: cKDTree, labels: NDArray[np.int64], source: dict[int, int],
+    report: SplitReport,
+) -> None:
+    """Raise, naming the input segment, when a piece of a split is still no 3/4-sided region
+    (the message of a later stage would name a label the user never gave)."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    for label, ids in sorted(seg_corners.items()):
+        if label in source and len(ids) not in (3, 4):
+            first = source[label]
+            raise InputError(
+                f"segment {first} has {report.corners[first]} corners; a patch needs 3 or 4 "
+                f"and the automatic split into 3/4-sided pieces left one with {len(ids)} "
+                "(e.g. at a reflex corner, which the layout sees as no corner) — split or "
+                "merge segments by hand so each is a 3- or 4-sided region"
+            )
+
+
+__all__ = ["SplitReport", "best_split", "split_segments"]

@@ -1,0 +1,229 @@
+"""Segments that are no 3- or 4-sided region are split into 3/4-sided patches.
+
+Own re-segmentations of analytic surfaces (:mod:`pde2cad.samples`), reconstructed with C1
+and read back from STEP: valid, closed where closed, seams without gaps or kinks, and close
+to the true surface."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from pde2cad import samples
+from pde2cad.layout.split import best_split
+
+pytest.importorskip("OCP")
+
+from pde2cad.occ import measure, read_step  # noqa: E402
+from pde2cad.reconstruct import Reconstruction, reconstruct  # noqa: E402
+
+
+def _true_error(rec: Reconstruction, cloud: samples.LabelledCloud) -> float:
+    """Mean distance of a 41 x 41 grid on every face to the true surface, over the diagonal."""
+    g = np.linspace(0.0, 1.0, 41)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    q = np.vstack([s.evaluate(u, v) for s in rec.surfaces.values()])
+    return float(cloud.distance(q).mean() / cloud.diagonal)
+
+
+def _check(
+    rec: Reconstruction, cloud: samples.LabelledCloud, tmp_path: Path, max_angle: float
+) -> dict:  # type: ignore[type-arg]
+    m = measure(read_step(rec.write_step(tmp_path / "split.step")))
+    assert m["valid"] and m["closed"] == cloud.closed
+    assert m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= max_angle
+    assert _true_error(rec, cloud) <= 1e-4
+    assert all(len(ids) in (3, 4) for ids in rec.network.loops.values())
+    return m
+
+
+def _tube_angle(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.arctan2(points[:, 1], points[:, 0]) % (2 * np.pi)
+
+
+def test_best_split_cuts_a_2x1_hexagon_into_its_squares() -> None:
+    """Corners of a 2 x 1 rectangle with the middle of both long sides as corners (T-nodes):
+    the chord between the T-nodes gives two squares."""
+    xy = np.array([[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]], dtype=float)
+    n = len(xy)
+    directions = {(i, j): xy[j] - xy[i] for i in range(n) for j in range(n) if i != j}
+    assert sorted(map(sorted, best_split(directions, n))) == [[0, 1, 4, 5], [1, 2, 3, 4]]
+
+
+def test_best_split_pentagon_cuts_from_the_t_node() -> None:
+    """A unit square with a T-node in its bottom side: a triangle and a quad whose chord
+    starts at the T-node (a chord elsewhere would leave the T-node a 180-degree corner)."""
+    xy = np.array([[0, 0], [0.5, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    directions = {(i, j): xy[j] - xy[i] for i in range(5) for j in range(5) if i != j}
+    pieces = best_split(directions, 5)
+    assert sorted(len(p) for p in pieces) == [3, 4]
+    chord = set(pieces[0]) & set(pieces[1])
+    assert 1 in chord
+
+
+def test_torus_two_patches_merged(tmp_path: Path) -> None:
+    """Two neighbouring torus patches as one segment: 6 corners (two of them T-nodes of the
+    neighbours' corners); cut back into two quads along the chord between the T-nodes."""
+    cloud = samples.torus(20000)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 16]} and rec.splits.corners == {0: 6}
+    assert rec.c0_fallback == []
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 16 and m["shared_edges"] == 32 and m["free_edges"] == 0
+
+
+def test_torus_one_patch_split_in_two(tmp_path: Path) -> None:
+    """One torus patch cut in two across the tube: its two neighbours around the tube get a
+    T-node each (5 corners); each is cut straight across its strip, which puts a T-node on
+    both sides of the opposite patch (6 corners), cut between them: the cut closes around
+    the tube and every corner joins four patches (exact C1)."""
+    cloud = samples.torus(20000)
+    lab = cloud.labels.copy()
+    lab[(lab == 0) & (_tube_angle(cloud.points) < np.pi / 4)] = 99
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert sorted(rec.splits.pieces) == [1, 2, 3]
+    assert all(len(p) == 2 for p in rec.splits.pieces.values())
+    assert rec.splits.corners == {1: 5, 2: 6, 3: 5}
+    assert all(rec.network.regular.values()) and rec.c0_fallback == []
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 20 and m["free_edges"] == 0
+
+
+def test_noisy_torus_two_patches_merged(tmp_path: Path) -> None:
+    """0.2 % noise: the T-nodes are still found and the cut follows the surface (a straight
+    cut in the PCA plane bowed across the half-tube and folded the seam, 68 deg)."""
+    cloud = samples.torus(20000, noise=0.002)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 16]}
+    m = measure(read_step(rec.write_step(tmp_path / "noisy.step")))
+    assert m["valid"] and m["closed"] and m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= 1.0
+    assert _true_error(rec, cloud) <= 1e-3  # noise sigma is 2e-3 of the diagonal
+
+
+def test_sheet_merge_cut_runs_to_the_open_boundary(tmp_path: Path) -> None:
+    """Two quadrants of the 2 x 2 sheet merged: one T-node (the centre) on a side of the
+    merged segment; the cut runs across to the open boundary, where it stops."""
+    cloud = samples.sheet(20000)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 4]} and rec.splits.corners == {0: 5}
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 4 and m["free_edges"] == 8
+
+
+@pytest.mark.parametrize("merged", [(0, 1), (0, 2)])
+def test_cylinder_merges(tmp_path: Path, merged: tuple[int, int]) -> None:
+    """The 4 x 2 tube with two neighbours merged, along the axis (0, 1) or around it (0, 2):
+    T-nodes on the neighbours' sides and on the open rims; every cut ends on a rim or at a
+    T-node, every corner stays regular."""
+    cloud = samples.cylinder(20000)
+    lab = cloud.labels.copy()
+    lab[lab == merged[1]] = merged[0]
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert merged[0] in rec.splits.pieces
+    assert rec.c0_fallback == [] and all(rec.network.regular.values())
+    _check(rec, cloud, tmp_path, 1.0)
+
+
+@pytest.mark.parametrize("merged, noise", [((4, 8), 0.0), ((4, 5), 0.0), ((4, 8), 0.002)])
+def test_teapot_body_patches_merged(
+    tmp_path: Path, merged: tuple[int, int], noise: float
+) -> None:
+    """Newell's body patches with two merged, one above the other (4, 8) or side by side
+    (4, 5, wrapping half-way round the body: the layout sees kinks along its long borders,
+    which are no T-nodes and are dropped), clean and with 0.2 % noise."""
+    cloud = samples.teapot(40000, parts=("body", "bottom"), noise=noise)
+    lab = cloud.labels.copy()
+    lab[lab == merged[1]] = merged[0]
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {merged[0]: [merged[0], 32]}
+    m = measure(read_step(rec.write_step(tmp_path / "teapot.step")), samples=40)
+    assert m["valid"] and m["free_edges"] == 4 and m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= 1.0
+    # The unsplit body + bottom: 1.4e-4 clean (the bottom's tight bend), 3.7e-4 noisy.
+    assert _true_error(rec, cloud) <= (2e-4 if noise == 0 else 1e-3)
+
+
+@pytest.mark.parametrize("shape", ["cylinder", "sphere6"])
+def test_one_segment_without_corners(tmp_path: Path, shape: str) -> None:
+    """The whole tube or sphere as one segment (no corner at all): the tube is cut into 4
+    sectors around its axis (found as the PCA axis the points keep an even distance from,
+    not the main axis: the tube is as tall as it is wide); the sphere, seen from its
+    centroid in every direction, into the 6 faces of a cube map."""
+    cloud = samples.SHAPES[shape](20000)
+    rec = reconstruct(cloud.points, np.zeros(len(cloud.points), dtype=np.int64), continuity="c1")
+    assert rec.splits.pieces == {0: list(range(4 if shape == "cylinder" else 6))}
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == (4 if shape == "cylinder" else 6)
+    assert m["free_edges"] == (8 if shape == "cylinder" else 0)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.002])
+def test_tube_as_two_halves(tmp_path: Path, noise: float) -> None:
+    """The tube as two halves meeting along two borders (sharing 4 corners, so no edge of
+    theirs is one border): merged, then cut into 4 sectors like a tube given as one
+    segment. Noisy: the sectors' rim corners lie up to the clustering gap from the sparse
+    rim loop (see ``edges.OPEN_REACH``)."""
+    cloud = samples.cylinder(20000, split=(2, 1), noise=noise)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert rec.splits.merged == {1: 0} and rec.splits.pieces == {0: [0, 2, 3, 4]}
+    assert "segment 1: merged into 0" in rec.splits.summary()
+    m = measure(read_step(rec.write_step(tmp_path / "halves.step")))
+    assert m["valid"] and not m["closed"] and m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert m["max_angle_deg"] <= 1.0
+    assert _true_error(rec, cloud) <= (1e-4 if noise == 0 else 1e-3)
+    assert m["n_faces"] == 4 and m["free_edges"] == 8
+
+
+def test_cli_reports_the_split(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``pde2cad reconstruct`` on a cloud with a merged segment: it writes the STEP and
+    says which segment became which patches (summary line and JSON report)."""
+    import json
+
+    from pde2cad.cli import main
+
+    cloud = samples.sheet(20000)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    np.save(tmp_path / "cloud.npy", np.column_stack([cloud.points, lab]))
+    out, report = tmp_path / "out.step", tmp_path / "report.json"
+    args = [str(tmp_path / "cloud.npy"), "--labels", "column4", "-o", str(out)]
+    assert main(["reconstruct", *args, "--continuity", "c1", "--report", str(report)]) == 0
+    assert "split: segment 0 (not 3- or 4-sided) -> 2 patches 0, 4" in capsys.readouterr().out
+    assert json.loads(report.read_text())["summary"]["splits"] == {"0": [0, 4]}
+    m = measure(read_step(out))
+    assert m["valid"] and m["n_faces"] == 4 and m["max_angle_deg"] <= 1.0
+
+
+def test_sparse_torus_merge_t_node_read_as_reflex() -> None:
+    """8000 points: a T-node's angle reads up to 231 degrees (the loop is coarse); it must
+    still count as a T-node, not as a reflex corner (an L-shape's inner corner, 270)."""
+    cloud = samples.torus(8000, seed=1)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 0
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 16]}
+    assert all(rec.network.regular.values())
+    assert _true_error(rec, cloud) <= 1e-4
+
+
+def test_sphere_face_halved(tmp_path: Path) -> None:
+    """A cube-sphere face cut in two: the cut runs on through the strip of faces around the
+    sphere (4, 5 and the opposite face 1) and closes; the 3-valent cube corners stay."""
+    cloud = samples.sphere6(20000)
+    lab = cloud.labels.copy()
+    lab[(lab == 0) & (cloud.points[:, 1] > 0)] = 9
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert sorted(rec.splits.pieces) == [1, 4, 5]
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 10 and m["free_edges"] == 0
