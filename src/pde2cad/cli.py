@@ -227,13 +227,14 @@ def _label_property(path: Path) -> str:
 
 def _read_labelled(args: argparse.Namespace) -> tuple[Any, Any, str]:
     """Points, labels and where the labels came from."""
-    from pde2cad.io.clouds import read_cloud
+    from pde2cad.io.clouds import check_cloud_suffix, read_cloud
 
     path = Path(args.cloud)
     if not path.is_file():
         raise InputError(f"point cloud file {path} does not exist; check the path")
     if path.stat().st_size == 0:
         raise InputError(f"point cloud file {path} is empty; check the file")
+    check_cloud_suffix(path)  # "unknown format" before any "no labels" advice
     source = args.labels
     if source is None:
         if path.suffix.lower() != ".ply":
