@@ -297,8 +297,17 @@ def _set_extents(doc: DxfDocument, drawing: Drawing, scale: float) -> None:
         lo, hi = box.extmin, box.extmax
     else:  # an empty drawing: the image area
         lo, hi = (0.0, 0.0, 0.0), (drawing.width * scale, drawing.height * scale, 0.0)
-    doc.header["$EXTMIN"] = (float(lo[0]), float(lo[1]), 0.0)
-    doc.header["$EXTMAX"] = (float(hi[0]), float(hi[1]), 0.0)
+    extmin, extmax = (float(lo[0]), float(lo[1]), 0.0), (float(hi[0]), float(hi[1]), 0.0)
+    # ezdxf copies the modelspace layout's extents into the header on save (and leaves the
+    # header's +-1e20 when they are unset), so set both.
+    msp = doc.modelspace()
+    try:
+        msp.dxf.extmin, msp.dxf.extmax = extmin, extmax
+        msp.dxf.limmin, msp.dxf.limmax = extmin[:2], extmax[:2]
+    except Exception:  # noqa: BLE001 - R12 has no LAYOUT object to carry them
+        pass
+    doc.header["$EXTMIN"], doc.header["$EXTMAX"] = extmin, extmax
+    doc.header["$LIMMIN"], doc.header["$LIMMAX"] = extmin[:2], extmax[:2]
     w, h = max(hi[0] - lo[0], 1e-9), max(hi[1] - lo[1], 1e-9)
     doc.set_modelspace_vport(height=max(h, w) * 1.05, center=((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2))
 

@@ -137,7 +137,7 @@ def _fits(p: NDArray[np.float64], tol: float) -> tuple[bool, float]:
 def ring_to_bulges(ring: NDArray[np.float64], tol: float) -> NDArray[np.float64]:
     """Closed polyline (n, 2), last vertex not repeated, as arcs and lines within ``tol``.
 
-    Greedy: from the sharpest vertex, each arc spans as many vertices as fit (found by
+    Greedy: from the sharpest vertex (or the largest curvature jump), each arc spans as many vertices as fit (found by
     doubling, then bisection). Returns bulge vertices ``(x, y, bulge)`` (m, 3) of a closed
     LWPOLYLINE/POLYLINE (bulge of the segment that starts at the vertex).
     """
@@ -147,9 +147,15 @@ def ring_to_bulges(ring: NDArray[np.float64], tol: float) -> NDArray[np.float64]
         raise InputError(f"a ring needs at least 3 vertices, got {n}")
     d_in = ring - np.roll(ring, 1, axis=0)
     d_out = np.roll(ring, -1, axis=0) - ring
-    cos = np.einsum("ij,ij->i", d_in, d_out) / np.maximum(
-        np.hypot(*d_in.T) * np.hypot(*d_out.T), 1e-300)
-    start = int(np.argmin(cos))
+    turn = np.arctan2(d_in[:, 0] * d_out[:, 1] - d_in[:, 1] * d_out[:, 0],
+                      np.einsum("ij,ij->i", d_in, d_out))
+    # Start at a sharp corner, else where the curvature jumps (a line meets an arc), so no
+    # arc of the ring is cut in two by the start.
+    if np.max(np.abs(turn)) > np.pi / 6.0:
+        start = int(np.argmax(np.abs(turn)))
+    else:
+        kappa = turn / np.maximum(0.5 * (np.hypot(*d_in.T) + np.hypot(*d_out.T)), 1e-300)
+        start = int(np.argmax(np.abs(kappa - np.roll(kappa, 1))))
     p = np.vstack([np.roll(ring, -start, axis=0), ring[start:start + 1]])
     out: list[tuple[float, float, float]] = []
     i = 0
