@@ -126,8 +126,11 @@ def _write_drawing(drawing: Any, target: Path, tmp: Path, args: argparse.Namespa
         return
     from pde2cad.io.dxf import dxf_document
 
+    notes: list[str] = []
     doc = dxf_document(drawing, curves=args.dxf_curves, version=args.dxf_version,
-                       offset=args.offset)
+                       offset=args.offset, notes=notes)
+    for note in notes:
+        print(f"pde2cad vectorize: warning: {target}: {note}", file=sys.stderr)
     try:
         doc.saveas(tmp)
     except OSError as exc:
