@@ -69,8 +69,8 @@ def offset_shape(
         Loops of the input that the offset closed up (no counterpart in the result).
     """
     try:
-        from shapely import geometry, ops
-        from shapely.geometry.polygon import orient
+        from shapely import geometry, ops  # type: ignore[import-untyped]
+        from shapely.geometry.polygon import orient  # type: ignore[import-untyped]
     except ImportError as exc:  # optional dependency
         raise ExportError(
             "--offset needs shapely; install it with: pip install 'pde2cad[dxf]'"
