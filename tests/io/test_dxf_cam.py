@@ -301,3 +301,22 @@ def test_offset_square_with_hole_and_a_hole_that_closes(tmp_path: Path) -> None:
     assert np.all(hv[:, 2] == 0.0)  # the hole shrinks with sharp corners
     assert np.allclose(np.sort(np.unique(hv[:, 0])), [42.0, 68.0], atol=1e-9)
     assert np.allclose(np.sort(np.unique(hv[:, 1])), [42.0, 58.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("name, d", [("glyph &", 1.5), ("glyph B", -0.8), ("star 7", 4.0)])
+def test_offset_of_vectorized_images_is_at_exactly_d(tmp_path: Path, name: str, d: float) -> None:
+    """Every point of the offset outline is at distance |d| from the Bézier outline (the
+    boundary of a Minkowski offset), within the tolerance."""
+    mask = IMAGES[name]()
+    drawing = vectorize(mask, tolerance=1.0)
+    tol = 0.05
+    notes = write_dxf(drawing, tmp_path / "k.dxf", offset=d, tolerance=tol)
+    msp = read_clean(tmp_path / "k.dxf").modelspace()
+    h = mask.shape[0]
+    outline = curve_points(drawing) * [1.0, -1.0] + [0.0, h]  # DXF frame, y up
+    pts = np.concatenate([bulge_path(np.array(pl.get_points("xyb")))[0]
+                          for pl in msp.query("LWPOLYLINE")])
+    dist = cKDTree(outline).query(pts)[0]
+    assert np.max(np.abs(dist - abs(d))) <= tol + 0.02  # + the 0.02 px outline sampling
+    n_out = len(msp.query('LWPOLYLINE[layer=="OUTER"]'))
+    assert n_out >= 1 and (notes == [] or "closes" in notes[0])
