@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import signal
 import subprocess
 import sys
+import tempfile
+import time
+from pathlib import Path
 
 import ezdxf
 import numpy as np
@@ -107,3 +113,177 @@ def test_arcs_dxf_stays_within_the_tolerance_of_the_pixel_boundary(ring_png, tmp
     d_arcs_to_boundary = cKDTree(boundary).query(pts)[0].max()
     assert d_boundary_to_arcs <= 1.0 + 0.01  # flattening at 1e-3, sample spacing 0.1
     assert d_arcs_to_boundary <= 1.0 + 0.06
+
+
+# --------------------------------------------------------------------------- no lost data
+def cli(*args, **kwargs) -> subprocess.CompletedProcess:  # noqa: ANN002, ANN003
+    return subprocess.run([sys.executable, "-m", "pde2cad.cli", *map(str, args)],
+                          capture_output=True, text=True, **kwargs)
+
+
+def litter(folder) -> list[str]:  # noqa: ANN001
+    return sorted(p.name for p in folder.iterdir() if ".pde2cad-" in p.name)
+
+
+@pytest.fixture
+def svg_named_image(ring_png, tmp_path):
+    """A PNG image whose name ends in .svg (what a user may well have)."""
+    path = tmp_path / "x.svg"
+    path.write_bytes(ring_png.read_bytes())
+    return path
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [[], ["-o", "{img}"], ["-o", "{tmp}/a.svg", "--report", "{img}"],
+     ["-o", "{tmp}/a.svg", "--report", "{tmp}/a.svg"], ["-o", "{tmp}/a.dxf", "-o", "{tmp}/./a.dxf"]],
+)
+def test_outputs_that_would_overwrite_an_input_or_each_other_are_refused(svg_named_image, tmp_path,
+                                                                           extra):
+    before = svg_named_image.read_bytes()
+    proc = cli("vectorize", svg_named_image, *[a.format(img=svg_named_image, tmp=tmp_path) for a in extra])
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "overwrite the input" in proc.stderr or "same file" in proc.stderr
+    assert svg_named_image.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.png", "x.svg"]
+
+
+def test_second_output_unwritable_writes_neither(ring_png, tmp_path):
+    (tmp_path / "a.svg").write_text("earlier")
+    proc = cli("vectorize", ring_png, "-o", tmp_path / "a.svg", "-o", tmp_path / "nope" / "b.dxf")
+    assert proc.returncode == 3 and "does not exist" in proc.stderr and "Traceback" not in proc.stderr
+    assert (tmp_path / "a.svg").read_text() == "earlier"
+    assert litter(tmp_path) == []
+
+
+def _as_nobody() -> list[str]:
+    """Run as an unprivileged user when root (root ignores folder permissions)."""
+    return ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"] if os.geteuid() == 0 else []
+
+
+@pytest.fixture
+def open_dir():
+    """A folder an unprivileged user can reach (pytest's tmp_path is 0700 when root)."""
+    path = Path(tempfile.mkdtemp(prefix="pde2cad-cli-"))
+    path.chmod(0o777)
+    yield path
+    for p in path.rglob("*"):
+        p.chmod(0o777)
+    shutil.rmtree(path)
+
+
+def test_report_into_read_only_folder_exits_3_and_leaves_no_svg(ring_png, open_dir):
+    img = open_dir / "ring.png"
+    img.write_bytes(ring_png.read_bytes())
+    img.chmod(0o644)
+    ro = open_dir / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    proc = subprocess.run([*_as_nobody(), sys.executable, "-m", "pde2cad.cli", "vectorize", str(img),
+                           "-o", str(open_dir / "r.svg"), "--report", str(ro / "r.json")],
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": src})
+    assert proc.returncode == 3, proc.stderr
+    assert "Traceback" not in proc.stderr and "r.json" in proc.stderr
+    assert not (open_dir / "r.svg").exists() and litter(open_dir) == [] and list(ro.iterdir()) == []
+
+
+def test_full_disk_while_writing_exits_3_with_nothing_written(ring_png, tmp_path):
+    import resource
+
+    def small_files() -> None:  # writes past 2 kB fail with EFBIG, as on a full disk
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    proc = cli("vectorize", ring_png, "-o", tmp_path / "r.svg", "-o", tmp_path / "r.dxf",
+               preexec_fn=small_files)
+    assert proc.returncode == 3, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.png"]
+
+
+def test_stdout_on_a_full_device_exits_3_without_traceback(ring_png, tmp_path):
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "pde2cad.cli", "vectorize", str(ring_png), "-o",
+                               str(tmp_path / "r.svg")], stdout=full, stderr=subprocess.PIPE, text=True)
+    assert proc.returncode == 3
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr
+    assert "summary could not be printed" in proc.stderr
+    assert (tmp_path / "r.svg").read_text().count("<path") == 1  # the outputs are written
+
+
+def test_closed_stdout_pipe_exits_0(ring_png, tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "pde2cad.cli", "vectorize", str(ring_png), "-o",
+                             str(tmp_path / "r.svg")], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # like `| head -0`
+    err = proc.stderr.read().decode()
+    assert proc.wait() == 0 and "Traceback" not in err and "Exception ignored" not in err
+
+
+@pytest.fixture
+def slow_image(tmp_path):
+    """A 7-point star that takes the vectorizer a few seconds."""
+    size = 300
+    a = -0.3 + np.arange(14) * np.pi / 7
+    r = np.where(np.arange(14) % 2 == 0, 0.45, 0.18) * size
+    from PIL import ImageDraw
+
+    img = Image.new("L", (size, size), 255)
+    ImageDraw.Draw(img).polygon([(size / 2 + x, size / 2 + y) for x, y in
+                                 zip(r * np.cos(a), r * np.sin(a))], fill=0)
+    path = tmp_path / "star.png"
+    img.save(path)
+    return path
+
+
+def _start_and_wait_for_temps(slow_image, folder) -> subprocess.Popen:  # noqa: ANN001
+    proc = subprocess.Popen([sys.executable, "-m", "pde2cad.cli", "vectorize", str(slow_image),
+                             "-o", str(folder / "s.svg"), "-o", str(folder / "s.dxf"),
+                             "--report", str(folder / "s.json")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while len(litter(folder)) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert proc.poll() is None, "the run ended before it could be stopped"
+    return proc
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_and_sigint_remove_the_temporary_files(slow_image, tmp_path, sig):
+    (tmp_path / "s.svg").write_text("earlier")
+    proc = _start_and_wait_for_temps(slow_image, tmp_path)
+    proc.send_signal(sig)
+    code = proc.wait(timeout=60)
+    err = proc.stderr.read().decode()
+    assert code == (-signal.SIGTERM if sig == signal.SIGTERM else 130), err
+    assert "Traceback" not in err
+    assert litter(tmp_path) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.png", "s.svg", "star.png"] or \
+        sorted(p.name for p in tmp_path.iterdir()) == ["s.svg", "star.png"]
+    assert (tmp_path / "s.svg").read_text() == "earlier"
+
+
+def test_kill_9_leftovers_are_removed_by_the_next_run(slow_image, tmp_path):
+    proc = _start_and_wait_for_temps(slow_image, tmp_path)
+    proc.kill()
+    proc.wait(timeout=60)
+    left = litter(tmp_path)
+    assert len(left) == 3 and all(f"-{proc.pid}-" in name for name in left)
+    assert not any((tmp_path / n).exists() for n in ("s.svg", "s.dxf", "s.json"))
+    again = cli("vectorize", slow_image, "-o", tmp_path / "s.svg", "-o", tmp_path / "s.dxf",
+                "--report", tmp_path / "s.json")
+    assert again.returncode == 0, again.stderr
+    assert litter(tmp_path) == []
+    assert json.loads((tmp_path / "s.json").read_text())["loops"] == 1
+
+
+def test_dxf_version_and_offset_flags(ring_png, tmp_path):
+    out = tmp_path / "r12.dxf"
+    proc = cli("vectorize", ring_png, "-o", out, "--dxf-version", "r12", "--offset", "0.5", "--dpi", "254")
+    assert proc.returncode == 0, proc.stderr
+    doc = ezdxf.readfile(out)
+    assert doc.dxfversion == "AC1009" and not doc.audit().has_errors
+    assert {e.dxftype() for e in doc.modelspace()} == {"POLYLINE"}
+    proc = cli("vectorize", ring_png, "-o", tmp_path / "r.svg", "--offset", "0.5")
+    assert proc.returncode == 2 and "DXF output only" in proc.stderr

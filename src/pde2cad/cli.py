@@ -58,50 +58,110 @@ def _add_vectorize(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dxf-curves", choices=["spline", "polyline", "arcs"], default="spline",
                    help="DXF entities: exact SPLINEs (default), or polylines/arcs for controllers "
                    "without spline support")
+    p.add_argument("--dxf-version", type=str.upper, choices=["R12", "R2000", "R2010"],
+                   default="R2010", help="DXF version (default R2010); R12 writes POLYLINEs of "
+                   "lines and arcs (bulges) for old laser/CNC software")
+    p.add_argument("--offset", type=float, default=0.0, metavar="MM",
+                   help="kerf compensation in DXF units (mm with --dpi/--scale, else px): outer "
+                   "loops grow, holes shrink by this distance (negative: the reverse); written as "
+                   "lines and arcs. Loops the offset closes up are left out (and named)")
     p.add_argument("--report", metavar="JSON", help="write loops, curves, errors and timing as JSON")
     p.set_defaults(run=_run_vectorize)
 
 
 def _run_vectorize(args: argparse.Namespace) -> int:
     from pde2cad.image.vectorize import vectorize
-    from pde2cad.io.atomic import atomic_path
+    from pde2cad.io.staging import OutputSet, check_paths
 
     outputs = [Path(o) for o in args.output] or [Path(args.image).with_suffix(".svg")]
     for out in outputs:
         if out.suffix.lower() not in (".svg", ".dxf"):
             raise InputError(f"output {out} must end in .svg or .dxf")
-    approximate = args.dxf_curves != "spline" and any(o.suffix.lower() == ".dxf" for o in outputs)
+    report = Path(args.report) if args.report else None
+    check_paths([args.image], [*outputs, report])
+    if args.offset and not any(o.suffix.lower() == ".dxf" for o in outputs):
+        raise InputError("--offset applies to DXF output only; add -o NAME.dxf")
+    approximate = (args.dxf_curves != "spline" or args.dxf_version == "R12" or args.offset) and any(
+        o.suffix.lower() == ".dxf" for o in outputs
+    )
     # Arcs and polylines approximate the Béziers within 10 % of the fit tolerance (the DXF
     # writer's default): fitting to 90 % keeps the written file within the user's tolerance.
     fit_tolerance = args.tolerance * (0.9 if approximate else 1.0)
-    drawing = vectorize(
-        args.image,
-        tolerance=fit_tolerance,
-        threshold=args.threshold,
-        invert=args.invert,
-        symmetry=not args.no_symmetry,
-        g1=not args.c0,
-        parameterization=args.parameterization,
-        corner_angle=args.corner_angle,
-        dpi=args.dpi,
-        scale=args.scale,
-    )
-    for out in outputs:
-        if out.suffix.lower() == ".svg":
-            drawing.write_svg(out)
-        else:
-            drawing.write_dxf(out, curves=args.dxf_curves)
-    if args.report:
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(json.dumps(drawing.report(), indent=2))
+    with OutputSet() as staged:
+        # Reserved before the fit: a missing or read-only folder fails at once, not after it.
+        tmps = {out: staged.path(out) for out in [*outputs, *([report] if report else [])]}
+        drawing = vectorize(
+            args.image,
+            tolerance=fit_tolerance,
+            threshold=args.threshold,
+            invert=args.invert,
+            symmetry=not args.no_symmetry,
+            g1=not args.c0,
+            parameterization=args.parameterization,
+            corner_angle=args.corner_angle,
+            dpi=args.dpi,
+            scale=args.scale,
+        )
+        for out in outputs:
+            _write_drawing(drawing, out, tmps[out], args)
+        if report is not None:
+            _write_text(tmps[report], report, json.dumps(drawing.report(), indent=2))
+        staged.commit()
     symmetric = sum(1 for lp in drawing.loops if lp.symmetry)
-    print(
+    return _print_summary(
         f"vectorize: {len(drawing.shapes())} shapes, {len(drawing.loops)} loops, "
         f"{drawing.n_curves} curves ({drawing.n_fitted_curves} independent), "
         f"max error {drawing.max_error:.3f} px "
         f"(tolerance {args.tolerance:g}), {symmetric} symmetric loops, "
         f"{drawing.time_s:.2f} s -> {', '.join(map(str, outputs))}"
     )
+
+
+def _write_drawing(drawing: Any, target: Path, tmp: Path, args: argparse.Namespace) -> None:
+    """One SVG or DXF output of ``vectorize`` into its staged file ``tmp``."""
+    if target.suffix.lower() == ".svg":
+        from pde2cad.io.svg import svg_string
+
+        _write_text(tmp, target, svg_string(drawing))
+        return
+    from pde2cad.io.dxf import dxf_document
+
+    notes: list[str] = []
+    doc = dxf_document(drawing, curves=args.dxf_curves, version=args.dxf_version,
+                       offset=args.offset, notes=notes)
+    for note in notes:
+        print(f"pde2cad vectorize: warning: {target}: {note}", file=sys.stderr)
+    try:
+        doc.saveas(tmp)
+    except OSError as exc:
+        raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
+
+
+def _write_text(tmp: Path, target: Path, text: str) -> None:
+    try:
+        tmp.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
+
+
+def _print_summary(text: str) -> int:
+    """Print the summary line; the outputs are written already, so a closed pipe (``| head``)
+    still ends in exit 0, while a stdout that cannot take it (``> /dev/full``) ends in exit 3
+    with a message on stderr. Never a traceback, neither now nor at interpreter exit."""
+    import os
+
+    try:
+        print(text, flush=True)
+    except OSError as exc:
+        # Point stdout at /dev/null so the interpreter's final flush has nowhere to fail.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        if isinstance(exc, BrokenPipeError):
+            return EXIT_OK
+        print(f"pde2cad: outputs written, but the summary could not be printed: "
+              f"{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_EXPORT
     return EXIT_OK
 
 

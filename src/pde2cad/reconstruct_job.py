@@ -19,8 +19,6 @@ import dataclasses
 import importlib.util
 import json
 import os
-import secrets
-import shutil
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -32,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pde2cad.errors import ExportError, InputError, Pde2CadError
+from pde2cad.io.staging import OutputSet
 
 #: Output suffixes per option (checked before any work is done).
 OUTPUT_SUFFIXES = {
@@ -47,9 +46,6 @@ LABEL_PROPERTIES = (
     "label", "labels", "scalar_label", "scalar_Label", "scalar_labels", "scalar_Labels",
     "segment", "segment_id", "scalar_segment", "scalar_Segment", "class", "scalar_class",
 )  # fmt: skip
-#: Characters of the target's stem kept in a staging name: with the random part and the
-#: suffix, the name stays within the usual 255-byte file-name limit for any legal target.
-STAGING_STEM = 64
 
 Progress = Callable[[str, int, int], None]
 Message = Callable[[str], None]
@@ -216,13 +212,14 @@ def label_property(path: Path) -> str:
 
 def read_labelled(job: ReconstructJob) -> tuple[NDArray[np.float64], NDArray[np.int64], str]:
     """Points, labels and where the labels came from."""
-    from pde2cad.io.clouds import read_cloud
+    from pde2cad.io.clouds import check_cloud_suffix, read_cloud
 
     path = Path(job.cloud)
     if not path.is_file():
         raise InputError(f"point cloud file {path} does not exist; check the path")
     if path.stat().st_size == 0:
         raise InputError(f"point cloud file {path} is empty; check the file")
+    check_cloud_suffix(path)  # "unknown format" before any "no labels" advice
     source = job.labels
     if source is None:
         if path.suffix.lower() != ".ply":
@@ -238,93 +235,10 @@ def read_labelled(job: ReconstructJob) -> tuple[NDArray[np.float64], NDArray[np.
 
 
 # --------------------------------------------------------------------------- 4-5. staging
-class Staging:
-    """Outputs written to temporary files beside their targets and renamed together at the
-    end: a failure anywhere (a later output, the read-back check) leaves no output of this
-    run behind, and a failure while renaming puts back what the targets held before."""
-
-    def __init__(self) -> None:
-        self.pending: dict[Path, Path] = {}
-
-    def path(self, target: Path) -> Path:
-        """A fresh temporary file beside ``target`` to write it to."""
-        import tempfile
-
-        parent = target.parent if str(target.parent) else Path(".")
-        try:
-            fd, name = tempfile.mkstemp(prefix=f".{target.stem[:STAGING_STEM]}.",
-                                        suffix=target.suffix, dir=parent)
-        except OSError as exc:
-            raise ExportError(f"cannot write {target}: {exc.strerror or exc}") from exc
-        os.close(fd)
-        self.pending[target] = Path(name)
-        return Path(name)
-
-    def commit(self) -> None:
-        """Rename every staged file onto its target; all or none.
-
-        1. Keep a backup (a hard link, or a copy) of each target that exists.
-        2. Rename the staged files into place.
-        3. On a failure, put every target back as it was (the backup, or no file) and
-           raise :class:`ExportError` naming the target that failed.
-        """
-        # mkstemp creates 0600 files; give the outputs the usual permissions (umask applied).
-        umask = os.umask(0o022)
-        os.umask(umask)
-        backups: dict[Path, Path | None] = {}
-        replaced: list[Path] = []
-        current: Path | None = None
-        try:
-            for target, tmp in self.pending.items():
-                current = target
-                os.chmod(tmp, 0o666 & ~umask)
-                backups[target] = _backup(target)
-            for target, tmp in self.pending.items():
-                current = target
-                os.replace(tmp, target)
-                replaced.append(target)
-        except OSError as exc:
-            _restore(backups, replaced)
-            raise ExportError(f"cannot write {current}: {exc.strerror or exc}") from exc
-        else:
-            _restore(backups, [])
-        finally:
-            self.discard()
-
-    def discard(self) -> None:
-        """Remove the staged files (the targets are left as they are)."""
-        for tmp in self.pending.values():
-            tmp.unlink(missing_ok=True)
-        self.pending.clear()
-
-
-def _backup(target: Path) -> Path | None:
-    """A second name for ``target``'s current content (None when it does not exist)."""
-    if not target.exists():
-        return None
-    parent = target.parent if str(target.parent) else Path(".")
-    backup = parent / f".{target.stem[:STAGING_STEM]}.{secrets.token_hex(4)}.bak{target.suffix}"
-    try:
-        os.link(target, backup)
-    except OSError:
-        shutil.copy2(target, backup)  # file systems without hard links
-    return backup
-
-
-def _restore(backups: dict[Path, Path | None], replaced: list[Path]) -> None:
-    """Put each ``replaced`` target back as it was before the commit (its backup, or no
-    file); drop the other backups (best effort: the first error is already being raised)."""
-    for target, backup in backups.items():
-        try:
-            if target not in replaced:
-                if backup is not None:
-                    backup.unlink(missing_ok=True)
-            elif backup is None:
-                target.unlink(missing_ok=True)
-            else:
-                os.replace(backup, target)
-        except OSError:
-            pass
+#: The job's outputs are staged by the project's all-or-nothing output set (temporary files
+#: with short names, backups that put earlier results back on a failed commit, SIGTERM/SIGINT
+#: clean-up, stale temporaries of killed runs removed).
+Staging = OutputSet
 
 
 # --------------------------------------------------------------------------- 3. the fit

@@ -18,18 +18,27 @@ PTS = RNG.uniform(-5.0, 5.0, size=(200, 3))
 LAB = RNG.integers(0, 6, size=200)
 
 
-def write_ply(path: Path, pts: NDArray[np.float64], lab: NDArray[np.int64], binary: bool) -> None:
-    """A CloudCompare-like PLY: double x y z, uchar colour, float scalar_Label."""
+_FORMATS = {"<": "binary_little_endian", ">": "binary_big_endian", "": "ascii"}
+
+
+def write_ply(path: Path, pts: NDArray[np.float64], lab: NDArray[np.int64], order: str) -> None:
+    """A CloudCompare-like PLY: double x y z, uchar colour, float scalar_Label.
+
+    ``order`` is "<" or ">" for binary little/big endian, "" for ascii.
+    """
+    binary = bool(order)
     header = (
         "ply\nformat {} 1.0\ncomment written by a test\nelement vertex {}\n"
         "property double x\nproperty double y\nproperty double z\n"
         "property uchar red\nproperty uchar green\nproperty uchar blue\n"
         "property float scalar_Label\nend_header\n"
-    ).format("binary_little_endian" if binary else "ascii", len(pts))
+    ).format(_FORMATS[order], len(pts))
     rgb = np.full((len(pts), 3), 128, dtype=np.uint8)
     if binary:
-        rec = np.zeros(len(pts), dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("r", "u1"),
-                                        ("g", "u1"), ("b", "u1"), ("L", "<f4")])  # fmt: skip
+        o = order
+        rec = np.zeros(len(pts), dtype=[("x", o + "f8"), ("y", o + "f8"), ("z", o + "f8"),
+                                        ("r", "u1"), ("g", "u1"), ("b", "u1"),
+                                        ("L", o + "f4")])  # fmt: skip
         rec["x"], rec["y"], rec["z"] = pts.T
         rec["r"], rec["g"], rec["b"] = rgb.T
         rec["L"] = lab.astype(np.float32)
@@ -42,10 +51,10 @@ def write_ply(path: Path, pts: NDArray[np.float64], lab: NDArray[np.int64], bina
         path.write_text(header + "\n".join(lines) + "\n")
 
 
-@pytest.mark.parametrize("binary", [False, True])
-def test_ply_with_scalar_label(tmp_path: Path, binary: bool) -> None:
+@pytest.mark.parametrize("order", ["", "<", ">"])
+def test_ply_with_scalar_label(tmp_path: Path, order: str) -> None:
     path = tmp_path / "cloud.ply"
-    write_ply(path, PTS, LAB, binary)
+    write_ply(path, PTS, LAB, order)
     points, labels = read_cloud(path, labels="scalar_Label")
     np.testing.assert_array_equal(points, PTS)
     assert labels is not None and labels.dtype == np.int64
@@ -53,6 +62,24 @@ def test_ply_with_scalar_label(tmp_path: Path, binary: bool) -> None:
     np.testing.assert_array_equal(read_ply_property(path, "red"), 128.0)
     with pytest.raises(InputError, match="no vertex property 'label'.*scalar_Label"):
         read_cloud(path, labels="label")
+
+
+def test_big_endian_ply_reads_as_little_endian(tmp_path: Path) -> None:
+    write_ply(tmp_path / "le.ply", PTS, LAB, "<")
+    write_ply(tmp_path / "be.ply", PTS, LAB, ">")
+    assert (tmp_path / "le.ply").read_bytes() != (tmp_path / "be.ply").read_bytes()
+    le, be = read_cloud(tmp_path / "le.ply"), read_cloud(tmp_path / "be.ply")
+    np.testing.assert_array_equal(be[0], le[0])
+    np.testing.assert_array_equal(be[0], PTS)
+
+
+@pytest.mark.parametrize("count", ["abc", "-3", "1.5"])
+def test_bad_element_count_names_the_line(tmp_path: Path, count: str) -> None:
+    path = tmp_path / "bad.ply"
+    write_ply(path, PTS, LAB, "")
+    path.write_text(path.read_text().replace(f"element vertex {len(PTS)}", f"element vertex {count}"))
+    with pytest.raises(InputError, match=f"header line 4 'element vertex {count}'"):
+        read_cloud(path, labels="scalar_Label")
 
 
 def test_pcd_and_label_file(tmp_path: Path) -> None:
@@ -116,7 +143,7 @@ def test_errors(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="does not exist"):
         read_cloud(tmp_path / "missing.ply")
     (tmp_path / "a.las").write_text("x")
-    with pytest.raises(InputError, match="unknown point cloud extension '.las'"):
+    with pytest.raises(InputError, match="unknown point cloud format '.las'.*PLY/PCD/NPY/XYZ/PTS/TXT"):
         read_cloud(tmp_path / "a.las")
     (tmp_path / "empty.xyz").write_text("")
     with pytest.raises(InputError, match="no line starting with three numbers"):

@@ -14,7 +14,7 @@ from ezdxf.math import bulge_to_arc  # noqa: E402
 from pde2cad.curves.bezier import evaluate  # noqa: E402
 from pde2cad.errors import ExportError, InputError  # noqa: E402
 from pde2cad.image.drawing import Drawing, OutlineLoop  # noqa: E402
-from pde2cad.io.dxf import spline_data, to_dxf_coords, write_dxf  # noqa: E402
+from pde2cad.io.dxf import _signed_area, corner_joins, to_dxf_coords, write_dxf  # noqa: E402
 
 from drawing_shapes import circle_curves, square_curves  # noqa: E402
 
@@ -108,36 +108,42 @@ def bulge_path(verts: NDArray[np.float64]) -> tuple[NDArray[np.float64], list[tu
 
 
 @pytest.mark.parametrize("mm_per_px", [None, 25.4 / 300.0])
-def test_spline_mode_exact(tmp_path: Path, mm_per_px: float | None) -> None:
+def test_spline_mode_one_spline_per_corner_run(tmp_path: Path, mm_per_px: float | None) -> None:
     dr = make_drawing(mm_per_px)
     out = tmp_path / "out.dxf"
     write_dxf(dr, out)
     doc = read_clean(out)
     assert doc.dxfversion == "AC1024"  # R2010
     splines = list(doc.modelspace().query("SPLINE"))
-    exp = expected_loops(dr)
-    assert len(splines) == len(exp) == len(dr.loops)
-    for sp, (loop, c) in zip(splines, exp):
-        k = loop.n_curves
-        assert sp.dxf.layer == ("HOLES" if loop.is_hole else "OUTER")
-        assert sp.dxf.degree == 3
-        assert not sp.closed  # geometrically closed, not a periodic spline
-        cps = np.array(sp.control_points)[:, :2]
-        assert cps.shape == (3 * k + 1, 2)
-        assert np.array_equal(cps[0], cps[-1])
-        assert np.allclose(cps, spline_data(c)[0], atol=1e-12, rtol=0)
-        assert list(sp.knots) == [0.0] * 4 + [float(i) for i in range(1, k) for _ in range(3)] + [
-            float(k)
-        ] * 4
-        # The spline, evaluated by ezdxf, is our Bézier chain (with the y flip and scale).
-        tool = sp.construction_tool()
-        s = mm_per_px or 1.0
-        for j in range(k):
-            for t in np.linspace(0.0, 1.0, 7):
-                got = np.array(tool.point(j + t))[:2]
-                px = evaluate(loop.curves[j], np.array([t]))[0]
-                want = np.array([px[0] * s, (dr.height - px[1]) * s])
-                assert np.max(np.abs(got - want)) < 1e-9
+    # circle: no corner -> 1 run; square and its hole: 4 corners each; bean: 1 corner.
+    assert [len(corner_joins(c)) for _, c in expected_loops(dr)] == [0, 4, 4, 1]
+    assert len(splines) == 1 + 4 + 4 + 1
+    it = iter(splines)
+    for loop, c in expected_loops(dr):
+        runs = [next(it) for _ in range(max(len(corner_joins(c)), 1))]
+        area = 0.0
+        for sp in runs:
+            assert sp.dxf.layer == ("HOLES" if loop.is_hole else "OUTER")
+            assert sp.dxf.degree == 3 and not sp.closed
+            cps = np.array(sp.control_points)[:, :2]
+            m = (len(cps) - 1) // 3
+            assert list(sp.knots) == [0.0] * 4 + [float(i) for i in range(1, m) for _ in range(3)] + [
+                float(m)
+            ] * 4
+            bez = np.stack([cps[3 * i : 3 * i + 4] for i in range(m)])
+            area += _signed_area(bez)
+            # ezdxf's evaluation is the Bézier chain, and lies on the original loop.
+            tool = sp.construction_tool()
+            got = np.array([tool.point(u) for u in np.linspace(0.0, m, 40 * m + 1)])[:, :2]
+            want = np.concatenate([evaluate(b, np.linspace(0, 1, 41))[:-1] for b in bez] + [cps[-1:]])
+            assert np.max(np.abs(got - want)) < 1e-9
+            dense = np.concatenate([evaluate(b, _T) for b in c])
+            assert np.max(polyline_distance(got, dense)) < 1e-3 * (mm_per_px or 1.0)
+        # The runs tile the loop exactly: same enclosed area, ccw outside, cw for holes.
+        assert area == pytest.approx(abs(_signed_area(c)) * (-1 if loop.is_hole else 1), rel=1e-12)
+        # Run ends are the corners, in order, each shared by two runs.
+        ends = np.array([np.array(sp.control_points)[[0, -1], :2] for sp in runs])
+        assert np.allclose(ends[:, 1], np.roll(ends[:, 0], -1, axis=0), atol=1e-12, rtol=0)
 
 
 def test_units_and_layers(tmp_path: Path) -> None:
@@ -151,8 +157,8 @@ def test_units_and_layers(tmp_path: Path) -> None:
         assert doc.layers.has_entry("OUTER") and doc.layers.has_entry("HOLES")
         assert doc.layers.get("OUTER").color != doc.layers.get("HOLES").color
         msp = doc.modelspace()
-        assert len(msp.query('*[layer=="OUTER"]')) == 3
-        assert len(msp.query('*[layer=="HOLES"]')) == 1
+        assert len(msp.query('*[layer=="OUTER"]')) == 1 + 4 + 1  # one spline per run
+        assert len(msp.query('*[layer=="HOLES"]')) == 4
     # y up and scaled: the circle's top (smallest pixel y = 20) is its largest DXF y.
     cps_mm = np.array(mm.modelspace().query("SPLINE")[0].control_points)
     assert np.max(cps_mm[:, 1]) == pytest.approx((150 - 20) * 0.1)
@@ -161,7 +167,7 @@ def test_units_and_layers(tmp_path: Path) -> None:
 
 def test_drawing_method_writes_spline(tmp_path: Path) -> None:
     make_drawing().write_dxf(tmp_path / "d.dxf")
-    assert len(read_clean(tmp_path / "d.dxf").modelspace().query("SPLINE")) == 4
+    assert len(read_clean(tmp_path / "d.dxf").modelspace().query("SPLINE")) == 10
 
 
 # ------------------------------------------------------------------- polyline / arcs modes

@@ -13,7 +13,7 @@ Supported inputs of :func:`read_cloud`:
   with ``sample_points`` points (open3d ``sample_points_uniformly``).
 
 Labels come from a PLY vertex property (open3d drops non-standard properties, so the PLY
-header and vertex block are parsed here, for ``ascii`` and ``binary_little_endian``), from
+header and vertex block are parsed here, for ``ascii`` and both binary byte orders), from
 the 4th column of a text or ``.npy`` file, or from a separate ``.npy``/``.txt`` file with one
 integer per point. Float labels (CloudCompare writes ``scalar_Label`` as float) are accepted
 when every value is integral.
@@ -45,6 +45,27 @@ _PLY_TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
+#: Binary PLY formats -> numpy byte-order characters.
+_PLY_BYTE_ORDER = {"binary_little_endian": "<", "binary_big_endian": ">"}
+
+
+def check_cloud_suffix(path: str | Path) -> str:
+    """The lower-case suffix of ``path`` when it is a readable cloud/mesh format.
+
+    Raises
+    ------
+    InputError
+        For any other suffix (e.g. ``.las``), naming the formats that are read.
+    """
+    suffix = Path(path).suffix.lower()
+    known = (".ply", ".pcd", ".npy") + TEXT_SUFFIXES + MESH_SUFFIXES
+    if suffix not in known:
+        names = "/".join(dict.fromkeys(k.lstrip(".").upper() for k in known))
+        raise InputError(
+            f"unknown point cloud format {suffix or '(no suffix)'!r} of {path}; use {names} "
+            "(convert other formats, e.g. LAS/E57, with CloudCompare or PDAL)"
+        )
+    return suffix
 
 
 # --------------------------------------------------------------------------- PLY header
@@ -72,13 +93,18 @@ def _ply_header(path: Path) -> tuple[str, list[tuple[str, int, list[tuple[str, s
     offset = (newline + 1) if newline >= 0 else len(head)
     fmt = ""
     elements: list[tuple[str, int, list[tuple[str, str]]]] = []
-    for raw in head[:end].decode("ascii", errors="replace").splitlines():
+    for number, raw in enumerate(head[:end].decode("ascii", errors="replace").splitlines(), 1):
         words = raw.split()
         if not words:
             continue
         if words[0] == "format" and len(words) >= 2:
             fmt = words[1]
         elif words[0] == "element" and len(words) >= 3:
+            if not words[2].isdigit():
+                raise InputError(
+                    f"{path}: PLY header line {number} {raw.strip()!r} needs a whole, "
+                    "non-negative element count; fix or re-export the file"
+                )
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property" and elements:
             if words[1] == "list":
@@ -108,7 +134,7 @@ def read_ply_properties(path: str | Path, names: tuple[str, ...]) -> NDArray[np.
     Parameters
     ----------
     path : str or Path
-        An ``ascii`` or ``binary_little_endian`` PLY file.
+        An ``ascii``, ``binary_little_endian`` or ``binary_big_endian`` PLY file.
     names : tuple of str
         Vertex property names (exact, case-sensitive).
 
@@ -154,12 +180,13 @@ def read_ply_properties(path: str | Path, names: tuple[str, ...]) -> NDArray[np.
             )  # fmt: skip
         except ValueError as exc:
             raise InputError(f"{path}: cannot read vertex properties {names}: {exc}") from exc
-    elif fmt == "binary_little_endian":
+    elif fmt in _PLY_BYTE_ORDER:
+        order = _PLY_BYTE_ORDER[fmt]
         if any(any(t == "list" for _, t in e[2]) for e in elements[:v]):
             raise InputError(f"{path}: a list element before 'vertex' is not supported")
         for e in elements[:v]:
-            offset += e[1] * int(np.dtype([(p, "<" + _PLY_TYPES[t]) for p, t in e[2]]).itemsize)
-        dtype = np.dtype([(p, "<" + _PLY_TYPES[t]) for p, t in props])
+            offset += e[1] * int(np.dtype([(p, order + _PLY_TYPES[t]) for p, t in e[2]]).itemsize)
+        dtype = np.dtype([(p, order + _PLY_TYPES[t]) for p, t in props])
         raw = np.fromfile(path, dtype=np.uint8, offset=offset)
         if raw.size < count * dtype.itemsize:
             raise InputError(
@@ -171,7 +198,7 @@ def read_ply_properties(path: str | Path, names: tuple[str, ...]) -> NDArray[np.
     else:
         raise InputError(
             f"{path}: PLY format {fmt!r} is not supported for vertex properties; save it as "
-            "ascii or binary_little_endian"
+            "ascii, binary_little_endian or binary_big_endian"
         )
     if len(data) != count:
         raise InputError(f"{path} is truncated: {count} vertices declared, {len(data)} read")
@@ -346,12 +373,7 @@ def read_cloud(
     path = Path(path)
     if not path.is_file():
         raise InputError(f"point cloud file {path} does not exist; check the path")
-    suffix = path.suffix.lower()
-    known = (".ply", ".pcd", ".npy") + TEXT_SUFFIXES + MESH_SUFFIXES
-    if suffix not in known:
-        raise InputError(
-            f"unknown point cloud extension {suffix!r} of {path}; use one of {', '.join(known)}"
-        )
+    suffix = check_cloud_suffix(path)
     label_kind = _label_kind(labels)
     if label_kind == "column4" and suffix not in (".npy",) + TEXT_SUFFIXES:
         raise InputError(
@@ -368,7 +390,7 @@ def read_cloud(
                 "point cloud instead"
             )
         points = _sample_mesh(path, sample_points)
-    elif suffix == ".ply" and _ply_header(path)[0] in ("ascii", "binary_little_endian"):
+    elif suffix == ".ply" and _ply_header(path)[0] in ("ascii", *_PLY_BYTE_ORDER):
         # Parsed here, not by open3d: open3d returns garbage (not an error) for some
         # unreadable files, and this parser needs the header anyway for the labels.
         points = read_ply_properties(path, ("x", "y", "z"))
