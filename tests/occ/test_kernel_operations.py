@@ -201,3 +201,67 @@ def test_thicken_the_open_cylinder(sign: int) -> None:
     solid = build123d.Shape.cast(maker.Shape())
     _assert_valid_solid(solid)
     assert solid.volume == pytest.approx(case.part.area * case.d, rel=0.05)
+
+
+# ------------------------------------------------------------------ FreeCAD 0.20
+#: Runs in FreeCAD's own Python (never with OCP loaded): read the STEP, Part's strict check,
+#: the faces' continuity, and makeOffsetShape both ways (``fill`` thickens an open shell).
+FREECAD_SCRIPT = '''
+import json, sys
+sys.path.append("/usr/lib/freecad-python3/lib")
+import FreeCAD, Part
+path, d = sys.argv[1], float(sys.argv[2])
+s = Part.Shape()
+s.read(path)
+out = {"valid": s.isValid(), "continuity": sorted({f.Surface.Continuity for f in s.Faces})}
+try:
+    s.check(True)
+    out["check"] = ""
+except Exception as exc:
+    out["check"] = str(exc) or "failed"
+for sign in (1, -1):
+    o = s.makeOffsetShape(sign * d, 1e-6 * d, fill=not s.Solids)
+    out[str(sign)] = [o.isValid(), len(o.Solids), o.Volume]
+print("RESULT " + json.dumps(out))
+'''
+
+
+def _freecad(path: Any, d: float, tmp_path: Any) -> dict[str, Any]:
+    import json
+    import subprocess
+
+    from pde2cad.fc import freecad_python
+
+    python = freecad_python()
+    if python is None:
+        pytest.skip("FreeCAD 0.20 not installed (apt-get install freecad-python3)")
+    script = tmp_path / "fc_ops.py"
+    script.write_text(FREECAD_SCRIPT)
+    proc = subprocess.run(
+        [python, str(script), str(path), repr(d)], capture_output=True, text=True, timeout=600
+    )
+    lines = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
+    assert lines, proc.stderr[-2000:]
+    return dict(json.loads(lines[-1][len("RESULT "):]))
+
+
+@pytest.mark.parametrize("name", ["torus", "open3d_torus", "cylinder"])
+def test_freecad_checks_clean_and_offsets_both_ways(
+    solids: dict[str, Case], name: str, tmp_path: Any
+) -> None:
+    from pde2cad.occ import write_step
+
+    case = solids[name] if name in solids else _case(*_cloud(name))
+    step = write_step(case.rec.shape, tmp_path / f"{name}.step")
+    result = _freecad(step, case.d, tmp_path)
+    assert result["valid"] and result["check"] == ""
+    assert "C0" not in result["continuity"]
+    closed = isinstance(case.part, build123d.Solid)
+    for sign in (1, -1):
+        valid, n_solids, vol = result[str(sign)]
+        assert valid and n_solids == 1
+        # A closed solid grows or shrinks by A d; an open shell thickens to a wall A d.
+        expected = case.part.volume + sign * case.part.area * case.d if closed else (
+            case.part.area * case.d
+        )
+        assert vol == pytest.approx(expected, rel=0.02 if closed else 0.05)
