@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
-from OCP.BRep import BRep_Tool
+from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import (
     BRepBuilderAPI_MakeFace,
     BRepBuilderAPI_MakeSolid,
@@ -47,7 +47,7 @@ from OCP.TColgp import TColgp_Array2OfPnt
 from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
 from OCP.TopAbs import TopAbs_FACE, TopAbs_SHELL
 from OCP.TopExp import TopExp_Explorer
-from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
 
 from pde2cad.errors import ExportError, InputError
 from pde2cad.io.atomic import atomic_path
@@ -529,22 +529,63 @@ def read_iges(path: str | Path, units: str = "MM") -> TopoDS_Shape:
     return _read(IGESControl_Reader(), path, "IGES")
 
 
-def to_build123d(shape: TopoDS_Shape) -> build123d.Shape:
-    """Wrap an OCP shape as the matching build123d class (``Solid``, ``Shell``, ``Face``...)."""
+def as_topods(obj: object) -> TopoDS_Shape:
+    """The OCP shape behind ``obj`` (see the module docstring for what is accepted).
+
+    Raises
+    ------
+    InputError
+        For anything else (a path, None, an array...), naming what was given.
+    """
+    if isinstance(obj, TopoDS_Shape):
+        if obj.IsNull():
+            raise InputError("cannot export a null shape")
+        return obj
+    wrapped = getattr(obj, "wrapped", None)
+    if isinstance(wrapped, TopoDS_Shape):
+        return as_topods(wrapped)
+    shape = getattr(obj, "shape", None)
+    if isinstance(shape, TopoDS_Shape):
+        return as_topods(shape)
+    vals = getattr(obj, "vals", None)
+    if callable(vals):  # CadQuery Workplane
+        return as_topods(list(vals()))
+    if isinstance(obj, (list, tuple)) and obj:
+        parts = [as_topods(o) for o in obj]
+        if len(parts) == 1:
+            return parts[0]
+        compound = TopoDS_Compound()
+        builder = BRep_Builder()
+        builder.MakeCompound(compound)
+        for part in parts:
+            builder.Add(compound, part)
+        return compound
+    raise InputError(
+        f"cannot export a {type(obj).__name__}: give a TopoDS_Shape, a build123d or CadQuery "
+        "shape, a Workplane, a list of shapes, or a reconstruction result"
+    )
+
+
+def to_build123d(shape: object) -> build123d.Shape:
+    """``shape`` (see :func:`as_topods`: an OCP shape, a CadQuery shape or ``Workplane``, a
+    list, a reconstruction result) as the matching build123d class (``Solid``, ``Shell``,
+    ``Face``, ``Compound``...)."""
     from build123d import Shape
 
-    return Shape.cast(shape)
+    return Shape.cast(as_topods(shape))
 
 
-def to_cadquery(shape: TopoDS_Shape) -> cadquery.Shape:
-    """Wrap an OCP shape as the matching CadQuery class (``Solid``, ``Shell``, ``Face``...)."""
+def to_cadquery(shape: object) -> cadquery.Shape:
+    """``shape`` (see :func:`as_topods`) as the matching CadQuery class (``Solid``,
+    ``Shell``, ``Face``, ``Compound``...)."""
     from cadquery import Shape
 
-    return Shape.cast(shape)
+    return Shape.cast(as_topods(shape))
 
 
 __all__ = [
     "SewInfo",
+    "as_topods",
     "make_face",
     "read_iges",
     "read_step",
