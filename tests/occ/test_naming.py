@@ -116,3 +116,34 @@ def test_non_ascii_names_are_written_safely(sphere, tmp_path: Path) -> None:  # 
     path = write_step(sphere.shape, tmp_path / "w.step", name="Gehäuse 'A'", author="Zoë")
     text = path.read_text(encoding="ascii")
     assert "PRODUCT('Geh?use _A_'" in text and "('Zo?')" in text
+
+
+FREECAD_LABELS = '''
+import sys
+sys.path.append("/usr/lib/freecad-python3/lib")
+import FreeCAD, Import
+doc = FreeCAD.newDocument()
+Import.insert(sys.argv[1], doc.Name)
+print("LABELS " + "|".join(o.Label for o in doc.Objects))
+'''
+
+
+@pytest.mark.parametrize("suffix", [".step", ".igs"])
+def test_freecad_shows_the_part_by_its_name(sphere, tmp_path: Path, suffix: str) -> None:  # noqa: ANN001
+    """The issue's symptom: FreeCAD listed the part as "Open CASCADE STEP translator"."""
+    import subprocess
+
+    from pde2cad.fc import freecad_python
+
+    python = freecad_python()
+    if python is None:
+        pytest.skip("FreeCAD 0.20 not installed (apt-get install freecad-python3)")
+    path = pde2cad.export_step if suffix == ".step" else pde2cad.export_iges
+    out = path(sphere, tmp_path / f"pump_cover{suffix}")
+    script = tmp_path / "labels.py"
+    script.write_text(FREECAD_LABELS)
+    proc = subprocess.run(
+        [python, str(script), str(out)], capture_output=True, text=True, timeout=300
+    )
+    labels = [x for x in proc.stdout.splitlines() if x.startswith("LABELS ")]
+    assert labels and labels[-1] == "LABELS pump_cover", proc.stdout[-1000:]
