@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import sys
 import types
+from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Union
 
 from pde2cad.errors import ExportError, FitError, InputError, Pde2CadError
@@ -26,6 +28,8 @@ from pde2cad.errors import ExportError, FitError, InputError, Pde2CadError
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    import build123d
+    import cadquery
     from numpy.typing import ArrayLike
 
     from pde2cad.reconstruct import Reconstruction, SurfaceModel
@@ -38,10 +42,14 @@ __all__ = [
     "InputError",
     "Pde2CadError",
     "__version__",
+    "export_iges",
+    "export_step",
     "fit_patch",
     "fit_pde_surface",
     "fit_surfaces",
     "reconstruct",
+    "to_build123d",
+    "to_cadquery",
     "vectorize",
 ]
 
@@ -109,6 +117,63 @@ def reconstruct(
         points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
         cad_tolerance=cad_tolerance, progress=progress,
     )
+
+
+def export_step(
+    shape: object,
+    path: str | Path,
+    *,
+    schema: str = "AP214",
+    units: str = "MM",
+    name: str | None = None,
+    author: str | None = None,
+    organization: str | None = None,
+    face_names: Sequence[str] | None = None,
+) -> Path:
+    """Write a shape to STEP: a ``TopoDS_Shape``, a build123d / CadQuery shape or
+    ``Workplane``, a list of shapes, or a :func:`reconstruct` result (faces named after their
+    segments). ``name`` (default: the file name), ``author`` and ``organization`` go into the
+    header; see :func:`pde2cad.occ.export.export_step`. Needs OCP (``pde2cad[cad]``)."""
+    from pde2cad.occ.export import export_step as _export
+
+    return _export(
+        shape, path, schema=schema, units=units, name=name, author=author,
+        organization=organization, face_names=face_names,
+    )
+
+
+def export_iges(
+    shape: object,
+    path: str | Path,
+    *,
+    units: str = "MM",
+    name: str | None = None,
+    author: str | None = None,
+    organization: str | None = None,
+    face_names: Sequence[str] | None = None,
+) -> Path:
+    """Write a shape to IGES 5.3 (BRep solids/shells); takes what :func:`export_step` takes."""
+    from pde2cad.occ.export import export_iges as _export
+
+    return _export(
+        shape, path, units=units, name=name, author=author, organization=organization,
+        face_names=face_names,
+    )
+
+
+def to_build123d(shape: object) -> build123d.Shape:
+    """A shape, a list of shapes or a :func:`reconstruct` result as a build123d object
+    (``Solid`` for a closed reconstruction, ``Shell`` for an open one)."""
+    from pde2cad.occ.shape import to_build123d as _convert
+
+    return _convert(shape)
+
+
+def to_cadquery(shape: object) -> cadquery.Shape:
+    """A shape, a list of shapes or a :func:`reconstruct` result as a CadQuery ``Shape``."""
+    from pde2cad.occ.shape import to_cadquery as _convert
+
+    return _convert(shape)
 
 
 class _CallableModule(types.ModuleType):

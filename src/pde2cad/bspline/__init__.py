@@ -10,6 +10,7 @@ from pde2cad.bspline.convert import (
     patch_to_bspline,
 )
 from pde2cad.bspline.data import SIDES, BSplineCurve, BSplineSurface
+from pde2cad.bspline.reduce import reduce_curve, reduce_surface, remove_knot
 
 __all__ = [
     "SIDES",
@@ -20,4 +21,7 @@ __all__ = [
     "curve_to_bspline",
     "deformation_to_bspline",
     "patch_to_bspline",
+    "reduce_curve",
+    "reduce_surface",
+    "remove_knot",
 ]

@@ -23,6 +23,7 @@ from pde2cad.bspline.data import (
     merged_knots,
     missing_knots,
 )
+from pde2cad.bspline.reduce import reduce_surface
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons
@@ -292,10 +293,23 @@ def add_surfaces(a: BSplineSurface, b: BSplineSurface) -> BSplineSurface:
 
 
 def patch_to_bspline(
-    base: CoonsPatch, deformation: Deformation, tolerance: float, *, degree: int = 3
+    base: CoonsPatch,
+    deformation: Deformation,
+    tolerance: float,
+    *,
+    degree: int = 3,
+    knot_tolerance: float | None = None,
 ) -> BSplineSurface:
-    """One B-spline surface for ``base + deformation`` (Eq. 5.20): the exact Coons surface
-    plus the deformation approximated to ``tolerance`` (see :func:`deformation_to_bspline`)."""
-    return add_surfaces(
+    """One B-spline surface for ``base + deformation`` (Eq. 5.20).
+
+    1. The exact Coons surface (:func:`coons_to_bspline`, triple knots at the side breaks)
+       plus the deformation approximated to ``tolerance`` (:func:`deformation_to_bspline`).
+    2. The knots the geometry does not need are removed
+       (:func:`~pde2cad.bspline.reduce.reduce_surface` within ``knot_tolerance``, by default
+       1e-9 of the pole bounding box): a patch over C1 side chains comes out with double
+       knots, C1 as a kernel reads it, so it can be offset, shelled and thickened.
+    """
+    surface = add_surfaces(
         coons_to_bspline(base), deformation_to_bspline(deformation, tolerance, degree=degree)
     )
+    return reduce_surface(surface, knot_tolerance)

@@ -243,8 +243,9 @@ def elevation_matrix(
     if new_degree == degree:
         return np.eye(n), knots.copy()
     xi = greville(new_knots, new_degree)
-    matrix = np.linalg.solve(
-        basis_matrix(new_knots, new_degree, xi), basis_matrix(knots, degree, xi)
+    matrix: NDArray[np.float64] = np.asarray(
+        np.linalg.solve(basis_matrix(new_knots, new_degree, xi), basis_matrix(knots, degree, xi)),
+        dtype=np.float64,
     )
     matrix[0], matrix[-1] = 0.0, 0.0
     matrix[0, 0], matrix[-1, -1] = 1.0, 1.0

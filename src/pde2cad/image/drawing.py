@@ -145,6 +145,20 @@ class Drawing:
 
         write_dxf(self, path, curves=curves)
 
+    def to_build123d(self) -> list[Any]:
+        """One build123d ``Face`` per shape (outer loop with its holes) in the XY plane, in mm
+        when ``mm_per_px`` is set, ready for ``build123d.extrude``; needs OCP and build123d.
+        See :mod:`pde2cad.occ.drawing`."""
+        from pde2cad.occ.drawing import drawing_to_build123d
+
+        return drawing_to_build123d(self)
+
+    def to_cadquery(self) -> list[Any]:
+        """One CadQuery ``Face`` per shape, as :meth:`to_build123d`."""
+        from pde2cad.occ.drawing import drawing_to_cadquery
+
+        return drawing_to_cadquery(self)
+
     def report(self) -> dict[str, Any]:
         """A JSON-ready summary: loops, curves per loop, errors, parameterizations, symmetry."""
         return {

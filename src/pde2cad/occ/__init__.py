@@ -9,8 +9,12 @@ Importing it without OCP installed raises :class:`ImportError`; install ``pde2ca
 from __future__ import annotations
 
 from pde2cad.occ.continuity import measure
+from pde2cad.occ.drawing import drawing_faces
+from pde2cad.occ.export import export_iges, export_step
+from pde2cad.occ.naming import segment_face_names
 from pde2cad.occ.shape import (
     SewInfo,
+    as_topods,
     make_face,
     read_iges,
     read_step,
@@ -25,10 +29,15 @@ from pde2cad.occ.shape import (
 
 __all__ = [
     "SewInfo",
+    "as_topods",
+    "drawing_faces",
+    "export_iges",
+    "export_step",
     "make_face",
     "measure",
     "read_iges",
     "read_step",
+    "segment_face_names",
     "sew",
     "to_build123d",
     "to_cadquery",

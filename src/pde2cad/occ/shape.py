@@ -13,13 +13,15 @@ not depend on what ran earlier in the process.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
-from OCP.BRep import BRep_Tool
+from OCP.APIHeaderSection import APIHeaderSection_MakeHeader
+from OCP.BRep import BRep_Builder, BRep_Tool
 from OCP.BRepBuilderAPI import (
     BRepBuilderAPI_MakeFace,
     BRepBuilderAPI_MakeSolid,
@@ -31,23 +33,25 @@ from OCP.Geom import Geom_BSplineSurface
 from OCP.gp import gp_Pnt
 from OCP.GProp import GProp_GProps
 from OCP.IFSelect import IFSelect_ReturnStatus
-from OCP.IGESControl import IGESControl_Controller, IGESControl_Reader, IGESControl_Writer
+from OCP.IGESCAFControl import IGESCAFControl_Writer
+from OCP.IGESControl import IGESControl_Controller, IGESControl_Reader
 from OCP.Interface import Interface_Static
 from OCP.ShapeFix import ShapeFix_Solid
+from OCP.STEPCAFControl import STEPCAFControl_Controller, STEPCAFControl_Writer
 from OCP.STEPControl import (
     STEPControl_Controller,
     STEPControl_Reader,
     STEPControl_StepModelType,
-    STEPControl_Writer,
 )
 from OCP.TColgp import TColgp_Array2OfPnt
 from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
 from OCP.TopAbs import TopAbs_FACE, TopAbs_SHELL
 from OCP.TopExp import TopExp_Explorer
-from OCP.TopoDS import TopoDS, TopoDS_Face, TopoDS_Shape
+from OCP.TopoDS import TopoDS, TopoDS_Compound, TopoDS_Face, TopoDS_Shape
 
 from pde2cad.errors import ExportError, InputError
 from pde2cad.io.atomic import atomic_path
+from pde2cad.occ.naming import header_text, named_document
 
 if TYPE_CHECKING:
     import build123d
@@ -328,10 +332,41 @@ def _set_static(name: str, value: str | int) -> None:
         raise ExportError(f"OCCT rejected the exchange setting {name}={value!r}")
 
 
+def _originating_system() -> str:
+    from pde2cad import __version__
+
+    return f"pde2cad {__version__}"
+
+
+def _step_header(model: Any, name: str, author: str | None, organization: str | None) -> None:
+    """FILE_NAME of the STEP header: the part's name, author, organisation, originating
+    system pde2cad x.y; OCCT would write "Author" and leave the rest its own."""
+    header = APIHeaderSection_MakeHeader(model)
+    header.SetName(header_text(name))
+    header.SetAuthorValue(1, header_text(author or ""))
+    header.SetOrganizationValue(1, header_text(organization or ""))
+    header.SetOriginatingSystem(header_text(_originating_system()))
+    header.SetAuthorisation(header_text(organization or ""))
+
+
 def write_step(
-    shape: TopoDS_Shape, path: str | Path, *, schema: str = "AP214", units: str = "MM"
+    shape: TopoDS_Shape,
+    path: str | Path,
+    *,
+    schema: str = "AP214",
+    units: str = "MM",
+    name: str | None = None,
+    author: str | None = None,
+    organization: str | None = None,
+    face_names: Sequence[str] | None = None,
 ) -> Path:
-    """Write ``shape`` to a STEP file atomically.
+    """Write ``shape`` to a STEP file atomically, named and traceable.
+
+    1. The shape goes into an XCAF document with its name and face names
+       (:func:`~pde2cad.occ.naming.named_document`).
+    2. The exchange statics (schema, units, pcurves, sub-shape names) are set right before
+       the writer exists, as OCCT reads them when it creates the STEP model.
+    3. The header's FILE_NAME gets the name, author, organisation and "pde2cad x.y".
 
     Parameters
     ----------
@@ -344,6 +379,13 @@ def write_step(
     units : str
         Length unit of the shape's coordinates; the file declares this unit and no scaling
         is applied.
+    name : str, optional
+        Product name and header FILE_NAME name; default the file name without suffix.
+    author, organization : str, optional
+        Header author and organisation (empty when not given).
+    face_names : sequence of str, optional
+        One name per face in ``TopExp_Explorer`` order, written as the ``ADVANCED_FACE``
+        names (e.g. :func:`~pde2cad.occ.naming.segment_face_names`).
 
     Returns
     -------
@@ -353,7 +395,7 @@ def write_step(
     Raises
     ------
     InputError
-        On an unknown schema or unit, or a null shape.
+        On an unknown schema or unit, a null shape or a ``face_names`` of the wrong length.
     ExportError
         When OCCT fails to translate or write, or the folder does not exist.
     """
@@ -364,26 +406,36 @@ def write_step(
     if shape is None or shape.IsNull():
         raise InputError("cannot write a null shape")
     target = Path(path)
-    # Controller.Init registers the write.step.* statics; setting them before the writer
-    # exists matters because the schema is read when the writer creates its STEP model.
-    STEPControl_Controller.Init_s()
+    doc = named_document(shape, name or target.stem, face_names)
+    STEPCAFControl_Controller.Init_s()
     _set_static("write.step.schema", _STEP_SCHEMAS[key])
     _set_static("xstep.cascade.unit", unit)
     _set_static("write.step.unit", unit)
     # pcurves are what lets a reader (and measure()) rebuild exact face-edge relations.
     _set_static("write.surfacecurve.mode", 1)
+    _set_static("write.stepcaf.subshapes.name", 1)
     with atomic_path(target) as tmp:
-        writer = STEPControl_Writer()
-        status = writer.Transfer(shape, STEPControl_StepModelType.STEPControl_AsIs)
-        if status != IFSelect_ReturnStatus.IFSelect_RetDone:
-            raise ExportError(f"OCCT could not translate the shape to STEP (status {status.name})")
+        writer = STEPCAFControl_Writer()
+        writer.SetNameMode(True)
+        if not writer.Transfer(doc, STEPControl_StepModelType.STEPControl_AsIs):
+            raise ExportError("OCCT could not translate the shape to STEP")
+        _step_header(writer.ChangeWriter().Model(), name or target.stem, author, organization)
         status = writer.Write(str(tmp))
         if status != IFSelect_ReturnStatus.IFSelect_RetDone or not tmp.stat().st_size:
             raise ExportError(f"OCCT could not write {target} (status {status.name})")
     return target
 
 
-def write_iges(shape: TopoDS_Shape, path: str | Path, units: str = "MM") -> Path:
+def write_iges(
+    shape: TopoDS_Shape,
+    path: str | Path,
+    units: str = "MM",
+    *,
+    name: str | None = None,
+    author: str | None = None,
+    organization: str | None = None,
+    face_names: Sequence[str] | None = None,
+) -> Path:
     """Write ``shape`` to an IGES 5.3 file in BRep mode (MSBO solids/shells), atomically.
 
     Parameters
@@ -394,6 +446,13 @@ def write_iges(shape: TopoDS_Shape, path: str | Path, units: str = "MM") -> Path
         Target file; its folder must exist.
     units : str
         Length unit of the coordinates, declared in the global section without scaling.
+    name : str, optional
+        Product id and part label; the global section's file name is the target's name.
+        Default the file name without suffix.
+    author, organization : str, optional
+        Global section author and organisation (empty when not given).
+    face_names : sequence of str, optional
+        One name per face in ``TopExp_Explorer`` order (name properties, entity 406).
 
     Returns
     -------
@@ -404,6 +463,7 @@ def write_iges(shape: TopoDS_Shape, path: str | Path, units: str = "MM") -> Path
     if shape is None or shape.IsNull():
         raise InputError("cannot write a null shape")
     target = Path(path)
+    doc = named_document(shape, name or target.stem, face_names)
     IGESControl_Controller.Init_s()
     # BRep mode keeps faces joined by shared edges; the default (0) writes loose trimmed
     # surfaces, which a reader has to re-sew.
@@ -411,17 +471,22 @@ def write_iges(shape: TopoDS_Shape, path: str | Path, units: str = "MM") -> Path
     _set_static("xstep.cascade.unit", unit)
     _set_static("write.iges.unit", unit)
     with atomic_path(target) as tmp:
-        writer = IGESControl_Writer(unit, 1)
+        writer = IGESCAFControl_Writer()
+        writer.SetNameMode(True)
         # The IGES writer ignores xstep.cascade.unit and assumes the shape is in mm, so
         # it would scale coordinates into the file unit; declaring the shape's unit on the
         # model keeps the numbers as they are.
         model = writer.Model()
         section = model.GlobalSection()
         section.SetCascadeUnit(_MM_PER_UNIT[unit])
+        section.SetFileName(header_text(target.name))
+        section.SetSendName(header_text(name or target.stem))
+        section.SetAuthorName(header_text(author or ""))
+        section.SetCompanyName(header_text(organization or ""))
+        section.SetSystemId(header_text(_originating_system()))
         model.SetGlobalSection(section)
-        if not writer.AddShape(shape):
+        if not writer.Transfer(doc):
             raise ExportError("OCCT could not translate the shape to IGES")
-        writer.ComputeModel()
         if not writer.Write(str(tmp)) or not tmp.stat().st_size:
             raise ExportError(f"OCCT could not write {target}")
     return target
@@ -464,22 +529,63 @@ def read_iges(path: str | Path, units: str = "MM") -> TopoDS_Shape:
     return _read(IGESControl_Reader(), path, "IGES")
 
 
-def to_build123d(shape: TopoDS_Shape) -> build123d.Shape:
-    """Wrap an OCP shape as the matching build123d class (``Solid``, ``Shell``, ``Face``...)."""
+def as_topods(obj: object) -> TopoDS_Shape:
+    """The OCP shape behind ``obj`` (see the module docstring for what is accepted).
+
+    Raises
+    ------
+    InputError
+        For anything else (a path, None, an array...), naming what was given.
+    """
+    if isinstance(obj, TopoDS_Shape):
+        if obj.IsNull():
+            raise InputError("cannot export a null shape")
+        return obj
+    wrapped = getattr(obj, "wrapped", None)
+    if isinstance(wrapped, TopoDS_Shape):
+        return as_topods(wrapped)
+    shape = getattr(obj, "shape", None)
+    if isinstance(shape, TopoDS_Shape):
+        return as_topods(shape)
+    vals = getattr(obj, "vals", None)
+    if callable(vals):  # CadQuery Workplane
+        return as_topods(list(vals()))
+    if isinstance(obj, (list, tuple)) and obj:
+        parts = [as_topods(o) for o in obj]
+        if len(parts) == 1:
+            return parts[0]
+        compound = TopoDS_Compound()
+        builder = BRep_Builder()
+        builder.MakeCompound(compound)
+        for part in parts:
+            builder.Add(compound, part)
+        return compound
+    raise InputError(
+        f"cannot export a {type(obj).__name__}: give a TopoDS_Shape, a build123d or CadQuery "
+        "shape, a Workplane, a list of shapes, or a reconstruction result"
+    )
+
+
+def to_build123d(shape: object) -> build123d.Shape:
+    """``shape`` (see :func:`as_topods`: an OCP shape, a CadQuery shape or ``Workplane``, a
+    list, a reconstruction result) as the matching build123d class (``Solid``, ``Shell``,
+    ``Face``, ``Compound``...)."""
     from build123d import Shape
 
-    return Shape.cast(shape)
+    return Shape.cast(as_topods(shape))
 
 
-def to_cadquery(shape: TopoDS_Shape) -> cadquery.Shape:
-    """Wrap an OCP shape as the matching CadQuery class (``Solid``, ``Shell``, ``Face``...)."""
+def to_cadquery(shape: object) -> cadquery.Shape:
+    """``shape`` (see :func:`as_topods`) as the matching CadQuery class (``Solid``,
+    ``Shell``, ``Face``, ``Compound``...)."""
     from cadquery import Shape
 
-    return Shape.cast(shape)
+    return Shape.cast(as_topods(shape))
 
 
 __all__ = [
     "SewInfo",
+    "as_topods",
     "make_face",
     "read_iges",
     "read_step",
