@@ -168,17 +168,26 @@ class Reconstruction:
     c0_fallback: list[int] = field(default_factory=list)
     splits: SplitReport = field(default_factory=SplitReport)
 
-    def write_step(self, path: str | Path, units: str = "MM", **options: Any) -> Path:
-        """Write the sewn shape to a STEP file (options: see :func:`pde2cad.occ.write_step`)."""
-        from pde2cad.occ import write_step
+    def write_step(
+        self, path: str | Path, units: str = "MM", *, schema: str = "AP214",
+        name: str | None = None, author: str | None = None, organization: str | None = None,
+    ) -> Path:
+        """Write the sewn shape to a STEP file, faces named after their segments (see
+        :func:`pde2cad.occ.export.export_step`)."""
+        from pde2cad.occ.export import export_step
 
-        return write_step(self.shape, path, units=units, **options)
+        return export_step(self, path, schema=schema, units=units, name=name, author=author,
+                           organization=organization)
 
-    def write_iges(self, path: str | Path, units: str = "MM", **options: Any) -> Path:
-        """Write the sewn shape to an IGES file (options: see :func:`pde2cad.occ.write_iges`)."""
-        from pde2cad.occ import write_iges
+    def write_iges(
+        self, path: str | Path, units: str = "MM", *, name: str | None = None,
+        author: str | None = None, organization: str | None = None,
+    ) -> Path:
+        """Write the sewn shape to an IGES file (see :func:`pde2cad.occ.export.export_iges`)."""
+        from pde2cad.occ.export import export_iges
 
-        return write_iges(self.shape, path, units=units, **options)
+        return export_iges(self, path, units=units, name=name, author=author,
+                           organization=organization)
 
     def to_build123d(self) -> build123d.Shape:
         """The shape as a build123d ``Solid`` (closed) or ``Shell`` (open)."""

@@ -297,23 +297,24 @@ def _check_environment(job: ReconstructJob) -> None:
                          "'pde2cad[plots]', or leave out --preview")
 
 
-def _header_options(job: ReconstructJob) -> dict[str, str]:
-    """``name``/``author``/``organization`` for the writers, only those given (so writers
-    without these keywords keep working)."""
-    return {key: value for key in ("name", "author", "organization")
-            if (value := getattr(job, key)) is not None}
-
-
 def _write_cad(job: ReconstructJob, rec: Any, outputs: dict[str, Path],
                staging: Staging) -> Path:
-    """STEP (and IGES) to staging files; returns the staged STEP."""
-    from pde2cad.occ import write_iges, write_step
+    """STEP (and IGES) to staging files; returns the staged STEP.
 
-    header = _header_options(job)
-    step = staging.path(outputs["output"])
-    write_step(rec.shape, step, schema=job.schema, units=job.units, **header)
+    The product/file name defaults to the TARGET's stem (the staged file has a temporary
+    name); faces are named after their segments.
+    """
+    from pde2cad.occ.export import export_iges, export_step
+
+    target = outputs["output"]
+    name = job.name if job.name is not None else target.stem
+    step = staging.path(target)
+    export_step(rec, step, schema=job.schema, units=job.units, name=name, author=job.author,
+                organization=job.organization)
     if "iges" in outputs:
-        write_iges(rec.shape, staging.path(outputs["iges"]), units=job.units, **header)
+        iges_name = job.name if job.name is not None else outputs["iges"].stem
+        export_iges(rec, staging.path(outputs["iges"]), units=job.units, name=iges_name,
+                    author=job.author, organization=job.organization)
     return step
 
 
