@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pde2cad.curves import bezier
-from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit, curve_to_polyline_distance, fit_cubic, minimax_refine
+from pde2cad.curves import batchfit, bezier
+from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.errors import InputError
 
@@ -32,6 +32,13 @@ TINY_LOOP = 40
 # Fits whose maximum error is at most this factor over the tolerance get a minimax
 # refinement (reweighted least squares) before they are rejected.
 MINIMAX_RANGE = 1.4
+# Candidate stops per batched step of the break-point search, and the first step's
+# spread of lengths relative to the previous piece's.
+_ROUND = 3
+_SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
+# The break-point search tries these parameterizations (the two that win most often on
+# pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
+_SEARCH_METHODS = ("chord", "uniform")
 
 
 @dataclass
@@ -88,7 +95,7 @@ def start_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 
 class _Fitter:
-    """Shared state of one chain fit: points, tolerance and the piece test."""
+    """Shared state of one chain fit: points, tolerance and the batched piece test."""
 
     def __init__(
         self,
@@ -102,33 +109,75 @@ class _Fitter:
         self.points = points
         self.tol = tolerance * SAFETY
         self.param_points = param_points
-        self.method = method
+        self.all_names = list(METHODS) if method == "optimal" else [method]
+        self.names = [m for m in self.all_names if m in _SEARCH_METHODS] or self.all_names
 
-    def fit(self, i: int, j: int, p0, p3, tan0, tan3, *, best: bool) -> tuple[CubicFit, bool]:
-        """Fit points[i..j]; ``best`` tries every parameterization and keeps the best that
-        passes, otherwise the first passing one is returned (enough for the search)."""
-        pts = self.points[i : j + 1]
-        ppts = self.param_points[i : j + 1]
-        names = list(METHODS) if self.method == "optimal" else [self.method]
-        chosen: CubicFit | None = None
-        chosen_ok = False
-        for name in names:
-            fit = fit_cubic(
-                pts, p0=p0, p3=p3, tan0=tan0, tan3=tan3, method=name, param_points=ppts, rounds=self.rounds
-            )
-            if self.tol < fit.max_error <= MINIMAX_RANGE * self.tol:
-                fit = minimax_refine(fit, pts, p0, p3, _unit(tan0), _unit(tan3))
-            ok = fit.max_error <= self.tol and curve_to_polyline_distance(fit.ctrl, pts) <= self.tol
-            better = chosen is None or (ok, -fit.max_error) > (chosen_ok, -chosen.max_error)
-            if better:
-                chosen, chosen_ok = fit, ok
-            if ok and not best:
-                break
-            # Far outside the tolerance, another parameterization will not rescue the fit.
-            if not best and fit.max_error > 1.5 * self.tol:
-                break
-        assert chosen is not None
-        return chosen, chosen_ok
+    def fit_many(
+        self, i: int, stops: NDArray[np.int64], p0, p3s, tan0, tan3s, names: list[str] | None = None
+    ) -> list[tuple[CubicFit, bool]]:
+        """Fit points[i..stop] for every stop at once, each with every parameterization.
+
+        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
+        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
+        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
+        5. per candidate keep the best fit: passing first, then the least maximum error.
+
+        Parameters
+        ----------
+        stops : (m,) int, each > i
+        p3s : (m, D) float
+            End point of each candidate.
+        tan3s : (m, D) float or None
+            End tangent of each candidate.
+        """
+        names = self.names if names is None else names
+        stops = np.asarray(stops, dtype=np.int64)
+        m, nm = len(stops), len(names)
+        lengths = stops - i + 1
+        rows = np.minimum(i + np.arange(int(lengths.max()))[None, :], stops[:, None])
+        pts = np.tile(self.points[rows], (nm, 1, 1))
+        valid = np.tile(np.arange(rows.shape[1])[None, :] < lengths[:, None], (nm, 1))
+        ppts = self.param_points[rows]
+        t = np.concatenate([batchfit.parameters(name, ppts, lengths) for name in names])
+        dim = pts.shape[2]
+        batch = batchfit.Batch(
+            pts, valid,
+            np.broadcast_to(p0, (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
+            None if tan0 is None else np.broadcast_to(_unit(tan0), (m * nm, dim)),
+            None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
+        )
+        ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
+        worst = errors.max(axis=1)
+        near = (worst > self.tol) & (worst <= MINIMAX_RANGE * self.tol)
+        if near.any():
+            sub = _take(batch, near)
+            ctrl[near], t[near], errors[near] = batchfit.minimax_batch(sub, ctrl[near], t[near], errors[near])
+            worst = errors.max(axis=1)
+        ok = worst <= self.tol
+        if ok.any():
+            ok[ok] = batchfit.curve_to_polyline_batch(ctrl[ok], _take(batch, ok), t[ok]) <= self.tol
+        # 5. best per candidate: rows are method-major, candidate j at j, m + j, 2m + j, ...
+        score = np.where(ok, worst - 1e9, worst).reshape(nm, m)
+        pick = np.argmin(score, axis=0) * m + np.arange(m)
+        out = []
+        for j, b in enumerate(pick):
+            n_j = int(lengths[j])
+            fit = CubicFit(ctrl[b], t[b, :n_j].copy(), errors[b, :n_j].copy(), names[b // m])
+            out.append((fit, bool(ok[b])))
+        return out
+
+
+def _unit_rows(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12)
+
+
+def _take(batch: batchfit.Batch, rows: NDArray[np.bool_]) -> batchfit.Batch:
+    return batchfit.Batch(
+        batch.points[rows], batch.valid[rows], batch.p0[rows], batch.p3[rows],
+        None if batch.tan0 is None else batch.tan0[rows], None if batch.tan3 is None else batch.tan3[rows],
+    )
 
 
 def tangents(points: NDArray[np.float64], k: int = 2) -> NDArray[np.float64]:
@@ -222,22 +271,29 @@ def fit_chain(
     p0 = first_p
     all_ok = True
     while start < end:
-        fit, ok = fitter.fit(start, end, p0, last_p, tan, final_tan, best=False)
+        fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
         if ok:
             stop = end
         else:
-            stop, fit = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+            stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
         if stop < end and end - stop < MIN_POINTS - 1:
             # Leave the last piece enough points to be determined, if a slightly shorter
             # piece still passes (fit-ability is only nearly monotone in the length).
-            for cand in range(end - (MIN_POINTS - 1), max(start + MIN_POINTS - 2, end - 2 * MIN_POINTS), -1):
-                t3c = None if jtan is None else jtan[cand]
-                if fitter.fit(start, cand, p0, joins[cand], tan, t3c, best=False)[1]:
-                    stop = cand
-                    break
+            cands = np.arange(end - (MIN_POINTS - 1), max(start + MIN_POINTS - 2, end - 2 * MIN_POINTS), -1)
+            if cands.size:
+                found = _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
+                passing = [(c, f) for c, (f, good) in zip(cands.tolist(), found) if good]
+                if passing:
+                    stop, fit = passing[0]
+                    ok = True
         p3 = last_p if stop == end else joins[stop]
         t3 = final_tan if stop == end else (None if jtan is None else jtan[stop])
-        fit, ok = fitter.fit(start, stop, p0, p3, tan, t3, best=True)
+        if len(fitter.all_names) > len(fitter.names):
+            best, best_ok = fitter.fit_many(
+                start, np.array([stop]), p0, p3[None], tan, None if t3 is None else t3[None], fitter.all_names
+            )[0]
+            if (best_ok, -best.max_error) >= (ok, -fit.max_error):
+                fit, ok = best, best_ok
         all_ok = all_ok and ok
         pieces.append(fit)
         if max_pieces is not None and len(pieces) > max_pieces and stop < end:
@@ -264,45 +320,54 @@ def fit_chain(
     return chain
 
 
+def _test(fitter: _Fitter, start: int, stops, p0, tan, p3s, tan3s) -> list[tuple[CubicFit, bool]]:
+    return fitter.fit_many(start, np.asarray(stops, dtype=np.int64), p0, p3s, tan, tan3s)
+
+
 def _longest_prefix(
     fitter: _Fitter, start: int, end: int, p0: NDArray[np.float64], tan, joins, jtan, guess: int
-) -> tuple[int, CubicFit]:
-    """Largest stop in (start, end) such that points[start..stop] pass the test: doubling
-    from ``guess`` to bracket it, then bisection (Algorithm 1). ``end`` is known to fail."""
+) -> tuple[int, CubicFit, bool]:
+    """Largest stop in (start, end) such that points[start..stop] pass the test; ``end`` is
+    known to fail.
 
-    def test(m: int) -> tuple[CubicFit, bool]:
-        return fitter.fit(start, m, p0, joins[m], tan, None if jtan is None else jtan[m], best=False)
+    Algorithm 1's bisection, with many candidates per step: 1. test a spread of lengths
+    around ``guess`` (the previous piece's) in one batch; 2. keep the longest passing one as
+    the lower bracket and the shortest failing one above it as the upper; 3. test
+    ``_ROUND`` evenly spaced stops inside the bracket, again in one batch, until it closes.
+    Each batch shrinks the bracket about ninefold, so a few batches replace ~10 sequential
+    fits. 4. If even the shortest regular piece fails, shorten down to two points (a
+    straight piece, exact on its own points when its ends are free).
+    """
 
-    # Always advance: a piece of two points is a straight line that fits by construction.
+    def test(cands: NDArray[np.int64]) -> list[tuple[CubicFit, bool]]:
+        return _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
+
     lo = max(start + 1, min(start + MIN_POINTS - 1, end - 1))
-    lo_fit: CubicFit | None = None
     hi = end
-    m = min(start + max(guess, MIN_POINTS - 1), end - 1)
-    while lo < m < hi:
-        fit, ok = test(m)
-        if not ok:
-            hi = m
-            break
-        lo, lo_fit = m, fit
-        m = min(start + 2 * (m - start), end - 1)
-        if m == lo:
-            break
-    while hi - lo > 1:
-        m = (lo + hi) // 2
-        fit, ok = test(m)
-        if ok:
-            lo, lo_fit = m, fit
-        else:
-            hi = m
-    if lo_fit is None:
-        # Even the shortest regular piece fails: shorten down to two points (a straight
-        # piece, exact on its own points when its ends are free).
-        for m in range(lo, start, -1):
-            lo_fit, ok = test(m)
-            lo = m
-            if ok:
-                break
-    return lo, lo_fit
+    lo_fit: CubicFit | None = None
+    cands = start + np.round(max(guess, MIN_POINTS - 1) * _SPREAD).astype(np.int64)
+    cands = np.unique(np.clip(np.r_[lo, cands], lo, end - 1))
+    while cands.size:
+        results = test(cands)
+        passing = [(c, f) for c, (f, good) in zip(cands.tolist(), results) if good]
+        if passing and (lo_fit is None or passing[-1][0] > lo):
+            lo, lo_fit = passing[-1]
+        failing = [c for c, (_, good) in zip(cands.tolist(), results) if not good and c > lo]
+        hi = min([hi, *failing])
+        if lo_fit is None and lo in cands.tolist():
+            break  # the shortest regular piece failed
+        inner = np.unique(np.round(np.linspace(lo, hi, _ROUND + 2)[1:-1]).astype(np.int64))
+        cands = inner[(inner > lo) & (inner < hi)]
+        if lo_fit is None:
+            cands = np.r_[lo, cands]
+    if lo_fit is not None:
+        return lo, lo_fit, True
+    shorter = np.arange(lo, start, -1)
+    results = test(shorter)
+    for c, (f, good) in zip(shorter.tolist(), results):
+        if good:
+            return c, f, True
+    return start + 1, results[-1][0], False
 
 
 def denoise(
