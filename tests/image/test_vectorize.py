@@ -121,7 +121,8 @@ def test_rotation_symmetric_gear_costs_fewer_curves():
 def test_one_pixel_shape_is_traced_within_tolerance():
     mask = np.zeros((5, 5), bool)
     mask[2, 3] = True
-    d = pde2cad.vectorize(mask, 1.0)
+    assert pde2cad.vectorize(mask, 1.0).specks == 1  # a speck by default (potrace's turdsize)
+    d = pde2cad.vectorize(mask, 1.0, min_area=0)
     assert len(d.loops) == 1 and d.n_curves >= 1
     assert _errors(mask, d)["max_boundary_to_curve"] <= 1.0
 

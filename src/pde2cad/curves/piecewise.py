@@ -11,6 +11,7 @@ Dimension-free: the same code fits 2D outlines and 3D boundary curves.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 from pde2cad.curves import batchfit, bezier
 from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit
 from pde2cad.curves.parameterize import METHODS
-from pde2cad.errors import InputError
+from pde2cad.errors import FitError, InputError
 
 # Pieces keep at least this many points: fewer do not determine a cubic (the thesis's
 # Fig. 3.5(d) shows the 3-point failure of min-error splitting).
@@ -39,6 +40,10 @@ _SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
 # The break-point search tries these parameterizations (the two that win most often on
 # pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
 _SEARCH_METHODS = ("chord", "uniform")
+
+
+class DeadlineExceeded(FitError):
+    """A fit passed the ``deadline`` (a :func:`time.perf_counter` value) it was given."""
 
 
 @dataclass
@@ -205,6 +210,7 @@ def fit_chain(
     rounds: int = NEWTON_ROUNDS,
     c0_fallback: bool = True,
     max_pieces: int | None = None,
+    deadline: float | None = None,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -239,6 +245,8 @@ def fit_chain(
         Callers that have a plan B of their own (symmetric fits) switch it off.
     max_pieces : int, optional
         Give up (returning ``ok=False``) once more pieces than this are needed.
+    deadline : float, optional
+        Raise :class:`DeadlineExceeded` once ``time.perf_counter()`` passes it.
 
     Returns
     -------
@@ -271,6 +279,8 @@ def fit_chain(
     p0 = first_p
     all_ok = True
     while start < end:
+        if deadline is not None and time.perf_counter() > deadline:
+            raise DeadlineExceeded("the fit ran past its deadline")
         fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
         if ok:
             stop = end
@@ -313,7 +323,7 @@ def fit_chain(
         # on the points themselves, where a two-point piece is exact, so the tolerance holds.
         fallback = fit_chain(
             pts, tolerance, p_start=p_start, p_end=p_end, g1=False, param_points=ppts,
-            method=method, rounds=rounds,
+            method=method, rounds=rounds, deadline=deadline,
         )
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
@@ -435,6 +445,7 @@ def fit_closed(
     method: str = "optimal",
     start: int | None = None,
     sharpen: bool = True,
+    deadline: float | None = None,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -458,6 +469,8 @@ def fit_closed(
     sharpen : bool
         Place corners between straight sides where the two sides' lines meet (see
         :func:`corner_positions`) instead of on their nearest point.
+    deadline : float, optional
+        See :func:`fit_chain`.
 
     Returns
     -------
@@ -476,7 +489,8 @@ def fit_closed(
         if n <= TINY_LOOP:
             # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
             # and at this size the join cannot be seen.
-            one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method, max_pieces=1)
+            one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method,
+                            max_pieces=1, deadline=deadline)
             if one.ok and len(one.fits) == 1:
                 one.corners = [0]
                 return one, offset
@@ -486,14 +500,14 @@ def fit_closed(
             chain = fit_chain(
                 pts[ring], tolerance, p_start=pos[offset], p_end=pos[offset],
                 tan_start=tan[offset], tan_end=tan[offset], g1=True,
-                param_points=pos[ring], join_tangents=tan[ring], method=method,
+                param_points=pos[ring], join_tangents=tan[ring], method=method, deadline=deadline,
             )
         if chain is not None and not chain.ok:
             chain = None  # opened on the denoised curve it cannot hold: reopen on a vertex
         if chain is None or len(chain.fits) == 1:
             # One cubic cannot close G1 with itself: there the join is a corner.
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
-                              join_tangents=tan[ring], method=method)
+                              join_tangents=tan[ring], method=method, deadline=deadline)
             chain.corners = sorted(set(chain.corners) | {0})
         return chain, offset
     offset = int(cidx[0])
@@ -507,7 +521,7 @@ def fit_closed(
         run = closed[a : b + 1]
         pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
         chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
-                          param_points=pos, join_tangents=tan, method=method)
+                          param_points=pos, join_tangents=tan, method=method, deadline=deadline)
         corner_list.append(len(fits))
         corner_list.extend(len(fits) + c for c in chain.corners if c != 0)
         curves.append(chain.curves)

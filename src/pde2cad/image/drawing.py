@@ -80,6 +80,8 @@ class Drawing:
         Physical scale, when the user gave ``--dpi`` or ``--scale``.
     time_s : float
         Wall time of the trace in seconds.
+    specks : int
+        Loops dropped by despeckling (specks removed and small holes filled).
     """
 
     width: int
@@ -88,6 +90,7 @@ class Drawing:
     tolerance: float
     mm_per_px: float | None = None
     time_s: float = 0.0
+    specks: int = 0
 
     @property
     def n_curves(self) -> int:
@@ -159,6 +162,7 @@ class Drawing:
             "max_error_px": self.max_error,
             "mean_error_px": self.mean_error,
             "time_s": self.time_s,
+            "specks_dropped": self.specks,
             "loop_details": [
                 {
                     "shape": lp.shape,
