@@ -147,4 +147,4 @@ def test_report_lists_loops_errors_and_parameterizations():
     assert abs(rep["mm_per_px"] - 0.1) < 1e-12
     for lp in rep["loop_details"]:
         assert len(lp["parameterizations"]) == lp["curves"]
-        assert set(lp["parameterizations"]) <= {"chord", "centripetal", "uniform", "foley"}
+        assert set(lp["parameterizations"]) <= {"chord", "centripetal", "uniform", "foley", "line"}

@@ -40,6 +40,9 @@ _SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
 # The break-point search tries these parameterizations (the two that win most often on
 # pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
 _SEARCH_METHODS = ("chord", "uniform")
+#: Largest turn (degrees) between a straight piece and the tangent of a G1 join next to it;
+#: below it the join still reads as smooth, above it the line would add a corner.
+LINE_KINK = 8.0
 
 
 class DeadlineExceeded(FitError):
@@ -59,6 +62,9 @@ class ChainFit:
         Index of each piece's first point, then the last index.
     corners : list of int
         Indices of ``breaks`` where the join is sharp (C0 only).
+    lines : list of bool
+        Per piece: True where it is a straight line segment (stored as the degree-elevated
+        cubic ``p0, p0 + d/3, p0 + 2d/3, p3``); empty means no piece is.
     ok : bool
         Every piece passed the tolerance test (False only where even the shortest piece
         could not meet it under the G1 constraints; callers then refit with C0 joins).
@@ -69,6 +75,7 @@ class ChainFit:
     breaks: NDArray[np.int64]
     corners: list[int] = field(default_factory=list)
     ok: bool = True
+    lines: list[bool] = field(default_factory=list)
 
     @property
     def max_error(self) -> float:
@@ -353,6 +360,9 @@ def _longest_prefix(
         return _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
 
     lo = max(start + 1, min(start + MIN_POINTS - 1, end - 1))
+    if lo >= end:  # two points left: nothing shorter to try
+        fit, good = test(np.array([end]))[0]
+        return end, fit, good
     hi = end
     lo_fit: CubicFit | None = None
     cands = start + np.round(max(guess, MIN_POINTS - 1) * _SPREAD).astype(np.int64)
@@ -446,6 +456,7 @@ def fit_closed(
     start: int | None = None,
     sharpen: bool = True,
     deadline: float | None = None,
+    lines: bool = True,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -471,6 +482,8 @@ def fit_closed(
         :func:`corner_positions`) instead of on their nearest point.
     deadline : float, optional
         See :func:`fit_chain`.
+    lines : bool
+        Straight runs become line segments (:func:`line_chain`, :func:`straighten`).
 
     Returns
     -------
@@ -509,25 +522,86 @@ def fit_closed(
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
                               join_tangents=tan[ring], method=method, deadline=deadline)
             chain.corners = sorted(set(chain.corners) | {0})
-        return chain, offset
+        return (straighten(chain, pts[ring], tolerance) if lines else chain), offset
     offset = int(cidx[0])
     ring = np.r_[offset:n, 0 : offset + 1]
     closed = pts[ring]
     cuts = np.concatenate([cidx - offset, [n]])
     tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
     tips = np.vstack([tips, tips[:1]])
-    curves, fits, breaks, corner_list = [], [], [0], []
+    curves, fits, breaks, corner_list, flags = [], [], [0], [], []
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         run = closed[a : b + 1]
         pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
-        chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
-                          param_points=pos, join_tangents=tan, method=method, deadline=deadline)
+        chain = line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None
+        if chain is None:
+            chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
+                              param_points=pos, join_tangents=tan, method=method, deadline=deadline)
+            chain = straighten(chain, run, tolerance) if lines else chain
+        flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))
         corner_list.extend(len(fits) + c for c in chain.corners if c != 0)
         curves.append(chain.curves)
         fits.extend(chain.fits)
         breaks.extend(int(a) + chain.breaks[1:])
-    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list))), offset
+    chain = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list)))
+    chain.lines = flags
+    return chain, offset
+
+
+def _segment_distance(points: NDArray[np.float64], p0: NDArray[np.float64], p3: NDArray[np.float64]):
+    """Distances (n,) of points to the segment p0-p3 and their parameters (n,) on it."""
+    d = p3 - p0
+    length2 = float(d @ d)
+    t = np.clip((points - p0) @ d / length2, 0.0, 1.0) if length2 > 1e-24 else np.zeros(len(points))
+    return np.linalg.norm(points - (p0 + t[:, None] * d), axis=1), t
+
+
+def line_cubic(p0: NDArray[np.float64], p3: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The straight segment p0-p3 as a cubic (degree-elevated line), shape (4, D)."""
+    return np.stack([p0, p0 + (p3 - p0) / 3.0, p0 + 2.0 * (p3 - p0) / 3.0, p3])
+
+
+def line_chain(points, p0, p3, tolerance: float) -> ChainFit | None:
+    """One straight piece p0-p3 when every point lies within the tolerance of it, else None."""
+    err, t = _segment_distance(np.asarray(points, dtype=float), p0, p3)
+    if err.max() > tolerance * SAFETY:
+        return None
+    fit = CubicFit(line_cubic(p0, p3), t, err, "line")
+    chain = ChainFit(fit.ctrl[None], [fit], np.array([0, len(points) - 1], dtype=np.int64))
+    chain.lines = [True]
+    return chain
+
+
+def straighten(chain: ChainFit, points: NDArray[np.float64], tolerance: float) -> ChainFit:
+    """Make every piece whose points lie within the tolerance of its chord a straight line.
+
+    A least-squares cubic over a straight pixel edge bulges gently within the tolerance; its
+    chord has the same end points and follows the edge. At a G1 join (not in
+    ``chain.corners``; the chain's own ends count as corners) the chord may turn at most
+    :data:`LINE_KINK` degrees from the join tangent, so a short chord of a round arc never
+    puts a corner into a smooth outline.
+    """
+    lines = list(chain.lines) or [False] * len(chain.fits)
+    sharp = set(chain.corners) | {0, len(chain.fits)}
+    cos_kink = np.cos(np.radians(LINE_KINK))
+    for k, (a, b) in enumerate(zip(chain.breaks[:-1], chain.breaks[1:])):
+        if lines[k]:
+            continue
+        c = chain.curves[k]
+        chord = _unit(c[3] - c[0])
+        t0, t3 = start_tangent(c), end_tangent(c)
+        if chord is None or (k not in sharp and (t0 is None or t0 @ chord < cos_kink)):
+            continue
+        if k + 1 not in sharp and (t3 is None or t3 @ chord < cos_kink):
+            continue
+        line = line_chain(points[a : b + 1], chain.curves[k, 0], chain.curves[k, 3], tolerance)
+        if line is not None:
+            chain.curves[k] = line.curves[0]
+            chain.fits[k] = line.fits[0]
+            lines[k] = True
+    chain.lines = lines
+    return chain
 
 
 def corner_positions(

@@ -205,6 +205,29 @@ def _too_slow(name: str, max_seconds: float | None):
     )
 
 
+def _flag_lines(curves: NDArray[np.float64], slack: float) -> tuple[NDArray[np.float64], list[bool]]:
+    """Replace the cubics that lie within ``slack`` of their chord by the chord, flagged.
+
+    A cubic lies in the hull of its control points, so its distance to the chord is at most
+    that of p1 and p2, and the chord is as close to the cubic: moving to the chord changes
+    both directed distances to the pixel boundary by at most ``slack``.
+    """
+    if slack <= 0 or not len(curves):
+        return curves, [False] * len(curves)
+    p0, p3 = curves[:, 0], curves[:, 3]
+    d = p3 - p0
+    length2 = np.maximum(np.sum(d * d, axis=1), 1e-24)
+    dev = np.zeros(len(curves))
+    for i in (1, 2):
+        t = np.clip(np.sum((curves[:, i] - p0) * d, axis=1) / length2, 0.0, 1.0)
+        dev = np.maximum(dev, np.linalg.norm(curves[:, i] - (p0 + t[:, None] * d), axis=1))
+    flat = dev <= slack
+    out = curves.copy()
+    out[flat, 1] = p0[flat] + d[flat] / 3.0
+    out[flat, 2] = p0[flat] + 2.0 * d[flat] / 3.0
+    return out, flat.tolist()
+
+
 def _scale(dpi: float | None, scale: float | None) -> float | None:
     if dpi is not None and scale is not None:
         raise InputError("give either dpi or scale (mm per pixel), not both")
@@ -228,12 +251,17 @@ def _fit_loop(
     chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
+    is_line = list(chain.lines) or [False] * len(curves)
     sym_name = None
     fitted = len(curves)
     if symmetry and len(pts) >= _SYMMETRY_MIN_POINTS and len(curves) > 1:
         found = _fit_symmetric(pts, corners, tol, g1, method, len(curves))
         if found is not None:
             curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
+            curves, is_line = _flag_lines(curves, tol * SAFETY - max_err)
+            if any(is_line):
+                errors = points_to_curves(pts, curves)
+                max_err, mean_err = float(errors.max()), float(errors.mean())
     return OutlineLoop(
         curves=curves,
         is_hole=contour.is_hole,
@@ -245,6 +273,7 @@ def _fit_loop(
         corners=int(n_corners),
         symmetry=sym_name,
         fitted_curves=int(fitted),
+        is_line=is_line,
     )
 
 

@@ -141,6 +141,15 @@ def _add_loop(
             msp.add_lwpolyline(verts, format="xyseb", close=True, dxfattribs=attribs)
 
 
+def _add_line_loop(msp: Modelspace, curves: NDArray[np.float64], is_line: list[bool], layer: str) -> bool:
+    """A loop of straight lines only is written as one closed LWPOLYLINE of exact line
+    edges (in every mode); returns False for loops with curves."""
+    if not is_line or not all(is_line):
+        return False
+    msp.add_lwpolyline(curves[:, 0].tolist(), format="xy", close=True, dxfattribs={"layer": layer})
+    return True
+
+
 def _validate(drawing: Drawing, curves: str, tolerance: float | None) -> None:
     if curves not in CURVE_MODES:
         raise InputError(f"curves must be one of {', '.join(CURVE_MODES)}, got {curves!r}")
@@ -212,7 +221,9 @@ def write_dxf(
             if loop.n_curves == 0:
                 continue
             c = to_dxf_coords(loop.curves, drawing.height, scale)
-            _add_loop(msp, c, curves, tol, LAYER_HOLES if loop.is_hole else LAYER_OUTER)
+            layer = LAYER_HOLES if loop.is_hole else LAYER_OUTER
+            if not _add_line_loop(msp, c, loop.is_line, layer):
+                _add_loop(msp, c, curves, tol, layer)
 
     try:
         with atomic_path(path) as tmp:
