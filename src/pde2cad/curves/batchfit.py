@@ -238,6 +238,22 @@ def minimax_batch(batch: Batch, ctrl, t, errors, iterations: int = 3):
     return ctrl, t, errors
 
 
+def midpoint_errors(ctrl: NDArray[np.float64], batch: Batch, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Upper bound on the largest distance from the midpoints of consecutive points to each
+    curve: the curve point at the mean of the two parameters, after three Newton steps.
+
+    Returns
+    -------
+    (B,) float
+    """
+    mid = 0.5 * (batch.points[:, :-1] + batch.points[:, 1:])
+    tm = 0.5 * (t[:, :-1] + t[:, 1:])
+    for _ in range(3):
+        tm = _newton(ctrl, mid, tm)
+    pair = batch.valid[:, 1:]
+    return np.where(pair, np.linalg.norm(_evaluate(ctrl, tm) - mid, axis=2), 0.0).max(axis=1)
+
+
 def curve_to_polyline_batch(
     ctrl: NDArray[np.float64], batch: Batch, t: NDArray[np.float64], samples: int = 24, window: int = 8
 ) -> NDArray[np.float64]:

@@ -116,8 +116,10 @@ class _Fitter:
         param_points: NDArray[np.float64],
         method: str,
         rounds: int = NEWTON_ROUNDS,
+        midpoints: bool = False,
     ) -> None:
         self.rounds = rounds
+        self.midpoints = midpoints
         self.points = points
         self.tol = tolerance * SAFETY
         self.param_points = param_points
@@ -166,6 +168,8 @@ class _Fitter:
             ctrl[near], t[near], errors[near] = batchfit.minimax_batch(sub, ctrl[near], t[near], errors[near])
             worst = errors.max(axis=1)
         ok = worst <= self.tol
+        if self.midpoints and ok.any():
+            ok[ok] = batchfit.midpoint_errors(ctrl[ok], _take(batch, ok), t[ok]) <= self.tol
         if ok.any():
             ok[ok] = batchfit.curve_to_polyline_batch(ctrl[ok], _take(batch, ok), t[ok]) <= self.tol
         # 5. best per candidate: rows are method-major, candidate j at j, m + j, 2m + j, ...
@@ -218,6 +222,7 @@ def fit_chain(
     c0_fallback: bool = True,
     max_pieces: int | None = None,
     deadline: float | None = None,
+    edge_midpoints: bool = False,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -254,6 +259,9 @@ def fit_chain(
         Give up (returning ``ok=False``) once more pieces than this are needed.
     deadline : float, optional
         Raise :class:`DeadlineExceeded` once ``time.perf_counter()`` passes it.
+    edge_midpoints : bool
+        Also hold the tolerance at the midpoints between consecutive points (pixel
+        boundaries: the middle of a 1-px tip edge can be farther than both its ends).
 
     Returns
     -------
@@ -272,7 +280,7 @@ def fit_chain(
         jtan = tangents(ppts) if join_tangents is None else np.asarray(join_tangents, dtype=float)
     else:
         joins, jtan = pts, None
-    fitter = _Fitter(pts, tolerance, ppts, method, rounds)
+    fitter = _Fitter(pts, tolerance, ppts, method, rounds, edge_midpoints)
     end = len(pts) - 1
     start = 0
     first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
@@ -330,7 +338,7 @@ def fit_chain(
         # on the points themselves, where a two-point piece is exact, so the tolerance holds.
         fallback = fit_chain(
             pts, tolerance, p_start=p_start, p_end=p_end, g1=False, param_points=ppts,
-            method=method, rounds=rounds, deadline=deadline,
+            method=method, rounds=rounds, deadline=deadline, edge_midpoints=edge_midpoints,
         )
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
@@ -503,7 +511,7 @@ def fit_closed(
             # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
             # and at this size the join cannot be seen.
             one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method,
-                            max_pieces=1, deadline=deadline)
+                            max_pieces=1, deadline=deadline, edge_midpoints=True)
             if one.ok and len(one.fits) == 1:
                 one.corners = [0]
                 return one, offset
@@ -514,13 +522,15 @@ def fit_closed(
                 pts[ring], tolerance, p_start=pos[offset], p_end=pos[offset],
                 tan_start=tan[offset], tan_end=tan[offset], g1=True,
                 param_points=pos[ring], join_tangents=tan[ring], method=method, deadline=deadline,
+                edge_midpoints=True,
             )
         if chain is not None and not chain.ok:
             chain = None  # opened on the denoised curve it cannot hold: reopen on a vertex
         if chain is None or len(chain.fits) == 1:
             # One cubic cannot close G1 with itself: there the join is a corner.
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
-                              join_tangents=tan[ring], method=method, deadline=deadline)
+                              join_tangents=tan[ring], method=method, deadline=deadline,
+                              edge_midpoints=True)
             chain.corners = sorted(set(chain.corners) | {0})
         return (straighten(chain, pts[ring], tolerance) if lines else chain), offset
     offset = int(cidx[0])
@@ -536,7 +546,8 @@ def fit_closed(
         chain = line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None
         if chain is None:
             chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
-                              param_points=pos, join_tangents=tan, method=method, deadline=deadline)
+                              param_points=pos, join_tangents=tan, method=method, deadline=deadline,
+                              edge_midpoints=True)
             chain = straighten(chain, run, tolerance) if lines else chain
         flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))

@@ -443,7 +443,7 @@ def _fit_run(
             p_start=start_at, p_end=end_at,
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
-            max_pieces=None if budget is None else budget - len(fits),
+            max_pieces=None if budget is None else budget - len(fits), edge_midpoints=True,
         )
         if not chain.ok:
             return None
