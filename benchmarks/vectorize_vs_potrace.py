@@ -52,6 +52,25 @@ def load_mask(path: Path) -> np.ndarray:
     return read_image(path)
 
 
+def despeckled(mask: np.ndarray, area: int) -> np.ndarray:
+    """The mask without foreground specks (8-connected) and holes (4-connected) of at most
+    ``area`` pixels, computed independently of pde2cad with scipy.ndimage."""
+    from scipy import ndimage
+
+    out = mask.copy()
+    for fg, structure in ((True, np.ones((3, 3), bool)), (False, None)):
+        region = out if fg else ~np.pad(out, 1)
+        lab, _ = ndimage.label(region, structure=structure)
+        small = np.bincount(lab.ravel()) <= area
+        small[0] = False
+        hit = small[lab]
+        if fg:
+            out[hit] = False
+        else:
+            out[hit[1:-1, 1:-1]] = True
+    return out
+
+
 def get_vectorize() -> Any:
     """pde2cad.vectorize, or None when the package does not provide it (yet)."""
     try:
@@ -134,10 +153,14 @@ def bench_image(
     repeat: int,
     ratio_limit: float,
     timeout: float = 0.0,
+    with_nosym: bool = True,
 ) -> dict[str, Any]:
     mask = load_mask(path)
     row: dict[str, Any] = {"image": path.stem, "width": mask.shape[1], "height": mask.shape[0]}
     pt = run_potrace(mask)
+    # Both tools drop specks of up to 2 px by default (potrace's turdsize, our --min-area):
+    # distances are measured to the boundary of the mask without them.
+    mask = despeckled(mask, 2)
     pe = outline_error(mask, pt["curves"])
     row.update(
         potrace_segments=pt["segments"],
@@ -150,7 +173,7 @@ def bench_image(
     flags = ""
     try:
         ours = run_ours_limited(vectorize, mask, tolerance, repeat, timeout)
-        nosym = run_ours_limited(vectorize, mask, tolerance, 1, timeout, symmetry=False)
+        nosym = run_ours_limited(vectorize, mask, tolerance, 1, timeout, symmetry=False) if with_nosym else ours
     except Exception as exc:  # keep benchmarking the other images
         row["error"] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
         row["traceback"] = f"{exc}\n{traceback.format_exc()}"
@@ -241,6 +264,131 @@ def totals(rows: list[dict[str, Any]], ours: bool) -> dict[str, Any]:
     return t
 
 
+# ---------------------------------------------------------------------------- unseen sets
+#: Fonts that Debian (fonts-dejavu, fonts-liberation2) and matplotlib ship; none designed here.
+_FONT_DIRS = ("/usr/share/fonts/truetype/dejavu", "/usr/share/fonts/truetype/liberation2")
+_FONTS = ("DejaVuSans.ttf", "DejaVuSerif-Bold.ttf", "LiberationSerif-Italic.ttf", "LiberationMono-Regular.ttf")
+_GLYPHS = "AgKQRSWx&@%8e3?"
+
+
+def _find_font(name: str) -> Path | None:
+    for d in _FONT_DIRS:
+        if (Path(d) / name).exists():
+            return Path(d) / name
+    try:
+        import matplotlib
+
+        p = Path(matplotlib.__file__).parent / "mpl-data" / "fonts" / "ttf" / name
+        return p if p.exists() else None
+    except ImportError:
+        return None
+
+
+def _glyph(font_path: Path, ch: str, size: int) -> np.ndarray:
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = ImageFont.truetype(str(font_path), size)
+    im = Image.new("L", (2 * size, 2 * size), 255)
+    ImageDraw.Draw(im).text((size // 3, size // 6), ch, font=font, fill=0)
+    return np.asarray(im) < 128
+
+
+def _package_images() -> dict[str, np.ndarray]:
+    """Thresholded images that matplotlib ships (a photo, logos, DEMs as contour levels)."""
+    out: dict[str, np.ndarray] = {}
+    try:
+        import matplotlib
+    except ImportError:
+        return out
+    from PIL import Image
+
+    from pde2cad.image.raster import to_mask
+
+    sample = Path(matplotlib.__file__).parent / "mpl-data" / "sample_data"
+    for name in ("grace_hopper.jpg", "logo2.png", "Minduka_Present_Blue_Pack.png"):
+        if (sample / name).exists():
+            out[Path(name).stem] = to_mask(np.asarray(Image.open(sample / name).convert("L")))
+    for name, key in (("topobathy.npz", "topo"), ("jacksboro_fault_dem.npz", "elevation")):
+        if (sample / name).exists():
+            z = np.load(sample / name)[key].astype(float)
+            for q in (0.3, 0.5, 0.7):  # contour-map-like level sets
+                out[f"{Path(name).stem}_q{int(q * 100)}"] = z > np.quantile(z, q)
+    return out
+
+
+def _salt_pepper(mask: np.ndarray, rate: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return mask ^ (rng.random(mask.shape) < rate)
+
+
+def make_unseen_sets(folder: Path) -> dict[str, list[Path]]:
+    """Write the unseen image sets as PNGs into ``folder``; returns set name -> files.
+
+    Sets: ``glyphs`` (15 characters x 4 fonts at 64 px), ``glyphs_4x`` (a third of them
+    upscaled 4x by pixel replication: staircase edges), ``packages`` (matplotlib's sample
+    images thresholded by Otsu, DEM level sets), ``noisy`` (glyphs and package images with
+    0.5 % salt-and-pepper pixels).
+    """
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    sets: dict[str, list[Path]] = {"glyphs": [], "glyphs_4x": [], "packages": [], "noisy": []}
+
+    def save(kind: str, name: str, mask: np.ndarray) -> None:
+        p = folder / f"{kind}__{name}.png"
+        Image.fromarray(np.where(mask, 0, 255).astype(np.uint8)).save(p)
+        sets[kind].append(p)
+
+    glyphs = []
+    for font in _FONTS:
+        path = _find_font(font)
+        if path is None:
+            continue
+        for ch in _GLYPHS:
+            glyphs.append((f"{Path(font).stem}_{ord(ch)}", _glyph(path, ch, 64)))
+    for i, (name, m) in enumerate(glyphs):
+        save("glyphs", name, m)
+        if i % 3 == 0:
+            save("glyphs_4x", name, np.kron(m, np.ones((4, 4), bool)))
+        if i % 4 == 0:
+            save("noisy", name, _salt_pepper(m, 0.005, i))
+    for i, (name, m) in enumerate(_package_images().items()):
+        save("packages", name, m)
+        save("noisy", name, _salt_pepper(m, 0.005, 100 + i))
+    return {k: v for k, v in sets.items() if v}
+
+
+def set_summary(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rows if "ours_segments" in r]
+    pot = sum(r["potrace_segments"] for r in ok)
+    return {
+        "set": name,
+        "images": len(rows),
+        "failed": len(rows) - len(ok),
+        "potrace_segments": int(pot),
+        "ours_segments": int(sum(r["ours_segments"] for r in ok)),
+        "ratio": sum(r["ours_segments"] for r in ok) / max(pot, 1),
+        "images_above_potrace": sum(r["ours_segments"] > r["potrace_segments"] for r in ok),
+        "ours_max_boundary_to_curve": max((r["ours_max_error"] for r in ok), default=0.0),
+        "ours_max_curve_to_boundary": max((r["ours_max_curve_to_boundary"] for r in ok), default=0.0),
+        "potrace_max_error": max((r["potrace_max_error"] for r in ok), default=0.0),
+        "ours_mean_time_s": float(np.mean([r["ours_time_s"] for r in ok])) if ok else 0.0,
+        "potrace_mean_time_s": float(np.mean([r["potrace_time_s"] for r in ok])) if ok else 0.0,
+    }
+
+
+def print_set_summary(s: dict[str, Any]) -> None:
+    print(
+        f"SET {s['set']:10s} {s['images']:3d} images ({s['failed']} failed): segments ours"
+        f" {s['ours_segments']} / potrace {s['potrace_segments']} = {s['ratio']:.3f}"
+        f" ({s['images_above_potrace']} images above potrace); max dist boundary->curve"
+        f" {s['ours_max_boundary_to_curve']:.3f}, curve->boundary {s['ours_max_curve_to_boundary']:.3f}"
+        f" (potrace {s['potrace_max_error']:.3f}) px; mean time ours {s['ours_mean_time_s']:.3f} s,"
+        f" potrace {s['potrace_mean_time_s']:.3f} s",
+        flush=True,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument(
@@ -257,12 +405,18 @@ def main(argv: list[str] | None = None) -> int:
         " (runs in a forked child; 0 = in process, no limit)",
     )
     ap.add_argument("--potrace-only", action="store_true")
+    ap.add_argument("--unseen", type=Path, metavar="DIR",
+                    help="write the unseen image sets (fonts, package images, noisy copies) into"
+                    " DIR and report each set")
+    ap.add_argument("--no-nosym", action="store_true", help="skip the symmetry=False run (faster)")
     ap.add_argument("--json", type=Path, help="write all numbers to this JSON file")
     args = ap.parse_args(argv)
 
     if shutil.which("potrace") is None:
         print("potrace is not installed (Debian package potrace)", file=sys.stderr)
         return 2
+    if args.unseen is not None:
+        return run_unseen(args)
     images = args.images or sorted((ROOT / "examples" / "images").glob("*.png"))
     if not images:
         print("no images", file=sys.stderr)
@@ -304,6 +458,32 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         out = {"tolerance": args.tolerance, "rows": rows, "totals": tot}
         args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+def run_unseen(args: argparse.Namespace) -> int:
+    """Benchmark every unseen set; print the rows, then one summary line per set."""
+    vectorize = get_vectorize()
+    sets = make_unseen_sets(args.unseen)
+    head = table_header(True)
+    summaries, all_rows = [], {}
+    for name, paths in sets.items():
+        print(f"\n== {name} ==\n{head}\n" + "-" * len(head), flush=True)
+        rows = []
+        for p in paths:
+            rows.append(bench_image(p, vectorize, args.tolerance, args.repeat, args.ratio, args.timeout,
+                                    with_nosym=not args.no_nosym))
+            print(table_row(rows[-1], True), flush=True)
+        summaries.append(set_summary(name, rows))
+        all_rows[name] = rows
+    print()
+    for s in summaries:
+        print_set_summary(s)
+    if args.json:
+        for rows in all_rows.values():
+            for r in rows:
+                r.pop("traceback", None)
+        args.json.write_text(json.dumps({"tolerance": args.tolerance, "sets": summaries, "rows": all_rows}, indent=1))
     return 0
 
 

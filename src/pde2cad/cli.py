@@ -37,9 +37,22 @@ def _add_vectorize(sub: argparse._SubParsersAction) -> None:
         description="Trace the boundary of a binary image with the fewest cubic Béziers "
         "within a tolerance, and write SVG and/or DXF.",
     )
-    p.add_argument("image", help="PNG, BMP, PBM/PGM, JPEG or TIFF image")
+    p.add_argument("images", nargs="+", metavar="IMAGE",
+                   help="PNG, BMP, PBM/PGM, JPEG or TIFF image(s); several need --out-dir")
     p.add_argument("-o", "--output", action="append", default=[], metavar="OUT",
                    help="output file, .svg or .dxf (repeat for both); default IMAGE.svg")
+    p.add_argument("--out-dir", metavar="DIR",
+                   help="batch mode: write IMAGE_STEM.svg/.dxf for every image into DIR")
+    p.add_argument("--format", default="svg", metavar="svg,dxf",
+                   help="batch mode: comma-separated output formats (default svg)")
+    p.add_argument("-j", "--jobs", type=int, default=0,
+                   help="batch mode: parallel worker processes (default: one per core)")
+    p.add_argument("--min-area", type=int, default=2, metavar="PX",
+                   help="drop specks and fill holes of at most PX pixels (potrace's turdsize, "
+                   "default 2; 0 keeps everything)")
+    p.add_argument("--max-seconds", type=_positive, default=600.0, metavar="S",
+                   help="stop with an error (exit 1, no output) when an image takes longer "
+                   "than S seconds (default 600)")
     p.add_argument("-t", "--tolerance", type=_positive, default=1.0,
                    help="max distance from the pixel boundary to the curves, px (default 1.0)")
     p.add_argument("--threshold", type=float, default=None,
@@ -66,7 +79,31 @@ def _add_vectorize(sub: argparse._SubParsersAction) -> None:
                    "loops grow, holes shrink by this distance (negative: the reverse); written as "
                    "lines and arcs. Loops the offset closes up are left out (and named)")
     p.add_argument("--report", metavar="JSON", help="write loops, curves, errors and timing as JSON")
-    p.set_defaults(run=_run_vectorize)
+    p.set_defaults(run=_dispatch_vectorize)
+
+
+def _dispatch_vectorize(args: argparse.Namespace) -> int:
+    """One image: :func:`_run_vectorize`; several, or ``--out-dir``: :func:`_run_vectorize_batch`."""
+    if args.min_area < 0:
+        raise InputError(f"--min-area must be >= 0 pixels, got {args.min_area}")
+    if args.out_dir is not None or len(args.images) > 1:
+        if args.output:
+            raise InputError("-o/--output names one file; with several images use --out-dir DIR")
+        if args.out_dir is None:
+            raise InputError(f"{len(args.images)} images given: add --out-dir DIR for their outputs")
+        return _run_vectorize_batch(args)
+    args.image = args.images[0]
+    return _run_vectorize(args)
+
+
+def vectorize_options(args: argparse.Namespace, tolerance: float) -> dict[str, Any]:
+    """Keyword arguments of :func:`pde2cad.image.vectorize.vectorize` from the parsed flags."""
+    return dict(
+        tolerance=tolerance, threshold=args.threshold, invert=args.invert,
+        symmetry=not args.no_symmetry, g1=not args.c0, parameterization=args.parameterization,
+        corner_angle=args.corner_angle, dpi=args.dpi, scale=args.scale,
+        min_area=args.min_area, max_seconds=args.max_seconds,
+    )
 
 
 def _run_vectorize(args: argparse.Namespace) -> int:
@@ -90,18 +127,7 @@ def _run_vectorize(args: argparse.Namespace) -> int:
     with OutputSet() as staged:
         # Reserved before the fit: a missing or read-only folder fails at once, not after it.
         tmps = {out: staged.path(out) for out in [*outputs, *([report] if report else [])]}
-        drawing = vectorize(
-            args.image,
-            tolerance=fit_tolerance,
-            threshold=args.threshold,
-            invert=args.invert,
-            symmetry=not args.no_symmetry,
-            g1=not args.c0,
-            parameterization=args.parameterization,
-            corner_angle=args.corner_angle,
-            dpi=args.dpi,
-            scale=args.scale,
-        )
+        drawing = vectorize(args.image, **vectorize_options(args, fit_tolerance))
         for out in outputs:
             _write_drawing(drawing, out, tmps[out], args)
         if report is not None:
@@ -113,6 +139,7 @@ def _run_vectorize(args: argparse.Namespace) -> int:
         f"{drawing.n_curves} curves ({drawing.n_fitted_curves} independent), "
         f"max error {drawing.max_error:.3f} px "
         f"(tolerance {args.tolerance:g}), {symmetric} symmetric loops, "
+        f"{drawing.specks} specks dropped, "
         f"{drawing.time_s:.2f} s -> {', '.join(map(str, outputs))}"
     )
 
@@ -163,6 +190,90 @@ def _print_summary(text: str) -> int:
               f"{exc.strerror or exc}", file=sys.stderr)
         return EXIT_EXPORT
     return EXIT_OK
+
+
+def _run_vectorize_batch(args: argparse.Namespace) -> int:
+    """Batch mode: every image into ``--out-dir``, ``--jobs`` worker processes, one line
+    per image and a total.
+
+    Steps: 1. check the formats and the folder before any work; 2. import the fitter once
+    (forked workers inherit it, so start-up is paid once); 3. vectorize and write each
+    image in a worker (each output atomically: a failed image leaves no file); 4. print
+    the lines in input order and return the first failure's exit code (0 when all pass).
+    """
+    import os
+    import time
+
+    # The workers are the parallelism: a BLAS thread pool in each would only oversubscribe
+    # the cores (numpy is not imported yet at this point, so the limit takes effect).
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    from pde2cad.image import vectorize as _fitter  # noqa: F401  (imported before forking)
+
+    started = time.perf_counter()
+    formats = [f.strip().lower().lstrip(".") for f in args.format.split(",") if f.strip()]
+    if not formats or any(f not in ("svg", "dxf") for f in formats):
+        raise InputError(f"--format must list svg and/or dxf (comma-separated), got {args.format!r}")
+    out_dir = Path(args.out_dir)
+    if not out_dir.is_dir():
+        raise ExportError(f"--out-dir {out_dir} is not a folder; create it first")
+    stems = [Path(i).stem for i in args.images]
+    if len(set(stems)) < len(stems):
+        raise InputError("two images share a file name; their outputs would overwrite each other")
+    approximate = args.dxf_curves != "spline" and "dxf" in formats
+    options = vectorize_options(args, args.tolerance * (0.9 if approximate else 1.0))
+    jobs = [(img, [out_dir / f"{Path(img).stem}.{f}" for f in dict.fromkeys(formats)], options, args.dxf_curves)
+            for img in args.images]
+    workers = min(args.jobs if args.jobs > 0 else (os.cpu_count() or 1), len(jobs))
+    if workers > 1:
+        import multiprocessing as mp
+
+        with mp.get_context("fork").Pool(workers) as pool:
+            results = pool.imap(_batch_one, jobs)
+            code, curves, failed = _batch_lines(results)
+    else:
+        code, curves, failed = _batch_lines(map(_batch_one, jobs))
+    wall = time.perf_counter() - started
+    print(f"vectorize: {len(jobs)} images, {failed} failed, {curves} curves, {wall:.2f} s "
+          f"({wall / len(jobs):.3f} s per image, {workers} workers) -> {out_dir}")
+    return code
+
+
+def _batch_lines(results) -> tuple[int, int, int]:
+    """Print one line per result; returns (first failure's exit code or 0, curves, failures)."""
+    code, curves, failed = EXIT_OK, 0, 0
+    for r in results:
+        if "error" in r:
+            failed += 1
+            code = code or r["code"]
+            print(f"{r['image']}: error: {r['error']}", flush=True)
+            continue
+        curves += r["curves"]
+        print(f"{r['image']}: {r['curves']} curves, max error {r['max_error']:.3f} px, "
+              f"{r['specks']} specks dropped, {r['time_s']:.2f} s -> {', '.join(r['outputs'])}", flush=True)
+    return code, curves, failed
+
+
+def _batch_one(job: tuple[str, list[Path], dict[str, Any], str]) -> dict[str, Any]:
+    """Vectorize and write one image of a batch; errors come back as a result, not raised."""
+    from pde2cad.image.vectorize import vectorize
+
+    image, outputs, options, dxf_curves = job
+    try:
+        drawing = vectorize(image, **options)
+        for out in outputs:
+            if out.suffix == ".svg":
+                drawing.write_svg(out)
+            else:
+                drawing.write_dxf(out, curves=dxf_curves)
+    except InputError as exc:
+        return {"image": image, "error": str(exc), "code": EXIT_INPUT}
+    except ExportError as exc:
+        return {"image": image, "error": f"cannot write output: {exc}", "code": EXIT_EXPORT}
+    except (Pde2CadError, MemoryError) as exc:
+        return {"image": image, "error": str(exc) or type(exc).__name__, "code": EXIT_ERROR}
+    return {"image": image, "curves": drawing.n_curves, "max_error": drawing.max_error,
+            "specks": drawing.specks, "time_s": drawing.time_s, "outputs": [str(o) for o in outputs]}
 
 
 # --------------------------------------------------------------------------- reconstruct

@@ -121,7 +121,8 @@ def test_rotation_symmetric_gear_costs_fewer_curves():
 def test_one_pixel_shape_is_traced_within_tolerance():
     mask = np.zeros((5, 5), bool)
     mask[2, 3] = True
-    d = pde2cad.vectorize(mask, 1.0)
+    assert pde2cad.vectorize(mask, 1.0).specks == 1  # a speck by default (potrace's turdsize)
+    d = pde2cad.vectorize(mask, 1.0, min_area=0)
     assert len(d.loops) == 1 and d.n_curves >= 1
     assert _errors(mask, d)["max_boundary_to_curve"] <= 1.0
 
@@ -146,4 +147,4 @@ def test_report_lists_loops_errors_and_parameterizations():
     assert abs(rep["mm_per_px"] - 0.1) < 1e-12
     for lp in rep["loop_details"]:
         assert len(lp["parameterizations"]) == lp["curves"]
-        assert set(lp["parameterizations"]) <= {"chord", "centripetal", "uniform", "foley"}
+        assert set(lp["parameterizations"]) <= {"chord", "centripetal", "uniform", "foley", "line"}

@@ -11,15 +11,16 @@ Dimension-free: the same code fits 2D outlines and 3D boundary curves.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pde2cad.curves import bezier
-from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit, curve_to_polyline_distance, fit_cubic, minimax_refine
+from pde2cad.curves import batchfit, bezier
+from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit, _unit
 from pde2cad.curves.parameterize import METHODS
-from pde2cad.errors import InputError
+from pde2cad.errors import FitError, InputError
 
 # Pieces keep at least this many points: fewer do not determine a cubic (the thesis's
 # Fig. 3.5(d) shows the 3-point failure of min-error splitting).
@@ -32,6 +33,20 @@ TINY_LOOP = 40
 # Fits whose maximum error is at most this factor over the tolerance get a minimax
 # refinement (reweighted least squares) before they are rejected.
 MINIMAX_RANGE = 1.4
+# Candidate stops per batched step of the break-point search, and the first step's
+# spread of lengths relative to the previous piece's.
+_ROUND = 3
+_SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
+# The break-point search tries these parameterizations (the two that win most often on
+# pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
+_SEARCH_METHODS = ("chord", "uniform")
+#: Largest turn (degrees) between a straight piece and the tangent of a G1 join next to it;
+#: below it the join still reads as smooth, above it the line would add a corner.
+LINE_KINK = 8.0
+
+
+class DeadlineExceeded(FitError):
+    """A fit passed the ``deadline`` (a :func:`time.perf_counter` value) it was given."""
 
 
 @dataclass
@@ -47,6 +62,9 @@ class ChainFit:
         Index of each piece's first point, then the last index.
     corners : list of int
         Indices of ``breaks`` where the join is sharp (C0 only).
+    lines : list of bool
+        Per piece: True where it is a straight line segment (stored as the degree-elevated
+        cubic ``p0, p0 + d/3, p0 + 2d/3, p3``); empty means no piece is.
     ok : bool
         Every piece passed the tolerance test (False only where even the shortest piece
         could not meet it under the G1 constraints; callers then refit with C0 joins).
@@ -57,6 +75,7 @@ class ChainFit:
     breaks: NDArray[np.int64]
     corners: list[int] = field(default_factory=list)
     ok: bool = True
+    lines: list[bool] = field(default_factory=list)
 
     @property
     def max_error(self) -> float:
@@ -88,7 +107,7 @@ def start_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 
 class _Fitter:
-    """Shared state of one chain fit: points, tolerance and the piece test."""
+    """Shared state of one chain fit: points, tolerance and the batched piece test."""
 
     def __init__(
         self,
@@ -97,38 +116,84 @@ class _Fitter:
         param_points: NDArray[np.float64],
         method: str,
         rounds: int = NEWTON_ROUNDS,
+        midpoints: bool = False,
     ) -> None:
         self.rounds = rounds
+        self.midpoints = midpoints
         self.points = points
         self.tol = tolerance * SAFETY
         self.param_points = param_points
-        self.method = method
+        self.all_names = list(METHODS) if method == "optimal" else [method]
+        self.names = [m for m in self.all_names if m in _SEARCH_METHODS] or self.all_names
 
-    def fit(self, i: int, j: int, p0, p3, tan0, tan3, *, best: bool) -> tuple[CubicFit, bool]:
-        """Fit points[i..j]; ``best`` tries every parameterization and keeps the best that
-        passes, otherwise the first passing one is returned (enough for the search)."""
-        pts = self.points[i : j + 1]
-        ppts = self.param_points[i : j + 1]
-        names = list(METHODS) if self.method == "optimal" else [self.method]
-        chosen: CubicFit | None = None
-        chosen_ok = False
-        for name in names:
-            fit = fit_cubic(
-                pts, p0=p0, p3=p3, tan0=tan0, tan3=tan3, method=name, param_points=ppts, rounds=self.rounds
-            )
-            if self.tol < fit.max_error <= MINIMAX_RANGE * self.tol:
-                fit = minimax_refine(fit, pts, p0, p3, _unit(tan0), _unit(tan3))
-            ok = fit.max_error <= self.tol and curve_to_polyline_distance(fit.ctrl, pts) <= self.tol
-            better = chosen is None or (ok, -fit.max_error) > (chosen_ok, -chosen.max_error)
-            if better:
-                chosen, chosen_ok = fit, ok
-            if ok and not best:
-                break
-            # Far outside the tolerance, another parameterization will not rescue the fit.
-            if not best and fit.max_error > 1.5 * self.tol:
-                break
-        assert chosen is not None
-        return chosen, chosen_ok
+    def fit_many(
+        self, i: int, stops: NDArray[np.int64], p0, p3s, tan0, tan3s, names: list[str] | None = None
+    ) -> list[tuple[CubicFit, bool]]:
+        """Fit points[i..stop] for every stop at once, each with every parameterization.
+
+        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
+        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
+        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
+        5. per candidate keep the best fit: passing first, then the least maximum error.
+
+        Parameters
+        ----------
+        stops : (m,) int, each > i
+        p3s : (m, D) float
+            End point of each candidate.
+        tan3s : (m, D) float or None
+            End tangent of each candidate.
+        """
+        names = self.names if names is None else names
+        stops = np.asarray(stops, dtype=np.int64)
+        m, nm = len(stops), len(names)
+        lengths = stops - i + 1
+        rows = np.minimum(i + np.arange(int(lengths.max()))[None, :], stops[:, None])
+        pts = np.tile(self.points[rows], (nm, 1, 1))
+        valid = np.tile(np.arange(rows.shape[1])[None, :] < lengths[:, None], (nm, 1))
+        ppts = self.param_points[rows]
+        t = np.concatenate([batchfit.parameters(name, ppts, lengths) for name in names])
+        dim = pts.shape[2]
+        batch = batchfit.Batch(
+            pts, valid,
+            np.broadcast_to(p0, (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
+            None if tan0 is None else np.broadcast_to(_unit(tan0), (m * nm, dim)),
+            None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
+        )
+        ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
+        worst = errors.max(axis=1)
+        near = (worst > self.tol) & (worst <= MINIMAX_RANGE * self.tol)
+        if near.any():
+            sub = _take(batch, near)
+            ctrl[near], t[near], errors[near] = batchfit.minimax_batch(sub, ctrl[near], t[near], errors[near])
+            worst = errors.max(axis=1)
+        ok = worst <= self.tol
+        if self.midpoints and ok.any():
+            ok[ok] = batchfit.midpoint_errors(ctrl[ok], _take(batch, ok), t[ok]) <= self.tol
+        if ok.any():
+            ok[ok] = batchfit.curve_to_polyline_batch(ctrl[ok], _take(batch, ok), t[ok]) <= self.tol
+        # 5. best per candidate: rows are method-major, candidate j at j, m + j, 2m + j, ...
+        score = np.where(ok, worst - 1e9, worst).reshape(nm, m)
+        pick = np.argmin(score, axis=0) * m + np.arange(m)
+        out = []
+        for j, b in enumerate(pick):
+            n_j = int(lengths[j])
+            fit = CubicFit(ctrl[b], t[b, :n_j].copy(), errors[b, :n_j].copy(), names[b // m])
+            out.append((fit, bool(ok[b])))
+        return out
+
+
+def _unit_rows(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12)
+
+
+def _take(batch: batchfit.Batch, rows: NDArray[np.bool_]) -> batchfit.Batch:
+    return batchfit.Batch(
+        batch.points[rows], batch.valid[rows], batch.p0[rows], batch.p3[rows],
+        None if batch.tan0 is None else batch.tan0[rows], None if batch.tan3 is None else batch.tan3[rows],
+    )
 
 
 def tangents(points: NDArray[np.float64], k: int = 2) -> NDArray[np.float64]:
@@ -156,6 +221,8 @@ def fit_chain(
     rounds: int = NEWTON_ROUNDS,
     c0_fallback: bool = True,
     max_pieces: int | None = None,
+    deadline: float | None = None,
+    edge_midpoints: bool = False,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -190,6 +257,11 @@ def fit_chain(
         Callers that have a plan B of their own (symmetric fits) switch it off.
     max_pieces : int, optional
         Give up (returning ``ok=False``) once more pieces than this are needed.
+    deadline : float, optional
+        Raise :class:`DeadlineExceeded` once ``time.perf_counter()`` passes it.
+    edge_midpoints : bool
+        Also hold the tolerance at the midpoints between consecutive points (pixel
+        boundaries: the middle of a 1-px tip edge can be farther than both its ends).
 
     Returns
     -------
@@ -208,7 +280,7 @@ def fit_chain(
         jtan = tangents(ppts) if join_tangents is None else np.asarray(join_tangents, dtype=float)
     else:
         joins, jtan = pts, None
-    fitter = _Fitter(pts, tolerance, ppts, method, rounds)
+    fitter = _Fitter(pts, tolerance, ppts, method, rounds, edge_midpoints)
     end = len(pts) - 1
     start = 0
     first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
@@ -222,22 +294,31 @@ def fit_chain(
     p0 = first_p
     all_ok = True
     while start < end:
-        fit, ok = fitter.fit(start, end, p0, last_p, tan, final_tan, best=False)
+        if deadline is not None and time.perf_counter() > deadline:
+            raise DeadlineExceeded("the fit ran past its deadline")
+        fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
         if ok:
             stop = end
         else:
-            stop, fit = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+            stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
         if stop < end and end - stop < MIN_POINTS - 1:
             # Leave the last piece enough points to be determined, if a slightly shorter
             # piece still passes (fit-ability is only nearly monotone in the length).
-            for cand in range(end - (MIN_POINTS - 1), max(start + MIN_POINTS - 2, end - 2 * MIN_POINTS), -1):
-                t3c = None if jtan is None else jtan[cand]
-                if fitter.fit(start, cand, p0, joins[cand], tan, t3c, best=False)[1]:
-                    stop = cand
-                    break
+            cands = np.arange(end - (MIN_POINTS - 1), max(start + MIN_POINTS - 2, end - 2 * MIN_POINTS), -1)
+            if cands.size:
+                found = _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
+                passing = [(c, f) for c, (f, good) in zip(cands.tolist(), found) if good]
+                if passing:
+                    stop, fit = passing[0]
+                    ok = True
         p3 = last_p if stop == end else joins[stop]
         t3 = final_tan if stop == end else (None if jtan is None else jtan[stop])
-        fit, ok = fitter.fit(start, stop, p0, p3, tan, t3, best=True)
+        if len(fitter.all_names) > len(fitter.names):
+            best, best_ok = fitter.fit_many(
+                start, np.array([stop]), p0, p3[None], tan, None if t3 is None else t3[None], fitter.all_names
+            )[0]
+            if (best_ok, -best.max_error) >= (ok, -fit.max_error):
+                fit, ok = best, best_ok
         all_ok = all_ok and ok
         pieces.append(fit)
         if max_pieces is not None and len(pieces) > max_pieces and stop < end:
@@ -257,52 +338,64 @@ def fit_chain(
         # on the points themselves, where a two-point piece is exact, so the tolerance holds.
         fallback = fit_chain(
             pts, tolerance, p_start=p_start, p_end=p_end, g1=False, param_points=ppts,
-            method=method, rounds=rounds,
+            method=method, rounds=rounds, deadline=deadline, edge_midpoints=edge_midpoints,
         )
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
     return chain
 
 
+def _test(fitter: _Fitter, start: int, stops, p0, tan, p3s, tan3s) -> list[tuple[CubicFit, bool]]:
+    return fitter.fit_many(start, np.asarray(stops, dtype=np.int64), p0, p3s, tan, tan3s)
+
+
 def _longest_prefix(
     fitter: _Fitter, start: int, end: int, p0: NDArray[np.float64], tan, joins, jtan, guess: int
-) -> tuple[int, CubicFit]:
-    """Largest stop in (start, end) such that points[start..stop] pass the test: doubling
-    from ``guess`` to bracket it, then bisection (Algorithm 1). ``end`` is known to fail."""
+) -> tuple[int, CubicFit, bool]:
+    """Largest stop in (start, end) such that points[start..stop] pass the test; ``end`` is
+    known to fail.
 
-    def test(m: int) -> tuple[CubicFit, bool]:
-        return fitter.fit(start, m, p0, joins[m], tan, None if jtan is None else jtan[m], best=False)
+    Algorithm 1's bisection, with many candidates per step: 1. test a spread of lengths
+    around ``guess`` (the previous piece's) in one batch; 2. keep the longest passing one as
+    the lower bracket and the shortest failing one above it as the upper; 3. test
+    ``_ROUND`` evenly spaced stops inside the bracket, again in one batch, until it closes.
+    Each batch shrinks the bracket about ninefold, so a few batches replace ~10 sequential
+    fits. 4. If even the shortest regular piece fails, shorten down to two points (a
+    straight piece, exact on its own points when its ends are free).
+    """
 
-    # Always advance: a piece of two points is a straight line that fits by construction.
+    def test(cands: NDArray[np.int64]) -> list[tuple[CubicFit, bool]]:
+        return _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
+
     lo = max(start + 1, min(start + MIN_POINTS - 1, end - 1))
-    lo_fit: CubicFit | None = None
+    if lo >= end:  # two points left: nothing shorter to try
+        fit, good = test(np.array([end]))[0]
+        return end, fit, good
     hi = end
-    m = min(start + max(guess, MIN_POINTS - 1), end - 1)
-    while lo < m < hi:
-        fit, ok = test(m)
-        if not ok:
-            hi = m
-            break
-        lo, lo_fit = m, fit
-        m = min(start + 2 * (m - start), end - 1)
-        if m == lo:
-            break
-    while hi - lo > 1:
-        m = (lo + hi) // 2
-        fit, ok = test(m)
-        if ok:
-            lo, lo_fit = m, fit
-        else:
-            hi = m
-    if lo_fit is None:
-        # Even the shortest regular piece fails: shorten down to two points (a straight
-        # piece, exact on its own points when its ends are free).
-        for m in range(lo, start, -1):
-            lo_fit, ok = test(m)
-            lo = m
-            if ok:
-                break
-    return lo, lo_fit
+    lo_fit: CubicFit | None = None
+    cands = start + np.round(max(guess, MIN_POINTS - 1) * _SPREAD).astype(np.int64)
+    cands = np.unique(np.clip(np.r_[lo, cands], lo, end - 1))
+    while cands.size:
+        results = test(cands)
+        passing = [(c, f) for c, (f, good) in zip(cands.tolist(), results) if good]
+        if passing and (lo_fit is None or passing[-1][0] > lo):
+            lo, lo_fit = passing[-1]
+        failing = [c for c, (_, good) in zip(cands.tolist(), results) if not good and c > lo]
+        hi = min([hi, *failing])
+        if lo_fit is None and lo in cands.tolist():
+            break  # the shortest regular piece failed
+        inner = np.unique(np.round(np.linspace(lo, hi, _ROUND + 2)[1:-1]).astype(np.int64))
+        cands = inner[(inner > lo) & (inner < hi)]
+        if lo_fit is None:
+            cands = np.r_[lo, cands]
+    if lo_fit is not None:
+        return lo, lo_fit, True
+    shorter = np.arange(lo, start, -1)
+    results = test(shorter)
+    for c, (f, good) in zip(shorter.tolist(), results):
+        if good:
+            return c, f, True
+    return start + 1, results[-1][0], False
 
 
 def denoise(
@@ -370,6 +463,8 @@ def fit_closed(
     method: str = "optimal",
     start: int | None = None,
     sharpen: bool = True,
+    deadline: float | None = None,
+    lines: bool = True,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -393,6 +488,10 @@ def fit_closed(
     sharpen : bool
         Place corners between straight sides where the two sides' lines meet (see
         :func:`corner_positions`) instead of on their nearest point.
+    deadline : float, optional
+        See :func:`fit_chain`.
+    lines : bool
+        Straight runs become line segments (:func:`line_chain`, :func:`straighten`).
 
     Returns
     -------
@@ -411,7 +510,8 @@ def fit_closed(
         if n <= TINY_LOOP:
             # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
             # and at this size the join cannot be seen.
-            one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method, max_pieces=1)
+            one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method,
+                            max_pieces=1, deadline=deadline, edge_midpoints=True)
             if one.ok and len(one.fits) == 1:
                 one.corners = [0]
                 return one, offset
@@ -421,34 +521,98 @@ def fit_closed(
             chain = fit_chain(
                 pts[ring], tolerance, p_start=pos[offset], p_end=pos[offset],
                 tan_start=tan[offset], tan_end=tan[offset], g1=True,
-                param_points=pos[ring], join_tangents=tan[ring], method=method,
+                param_points=pos[ring], join_tangents=tan[ring], method=method, deadline=deadline,
+                edge_midpoints=True,
             )
         if chain is not None and not chain.ok:
             chain = None  # opened on the denoised curve it cannot hold: reopen on a vertex
         if chain is None or len(chain.fits) == 1:
             # One cubic cannot close G1 with itself: there the join is a corner.
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
-                              join_tangents=tan[ring], method=method)
+                              join_tangents=tan[ring], method=method, deadline=deadline,
+                              edge_midpoints=True)
             chain.corners = sorted(set(chain.corners) | {0})
-        return chain, offset
+        return (straighten(chain, pts[ring], tolerance) if lines else chain), offset
     offset = int(cidx[0])
     ring = np.r_[offset:n, 0 : offset + 1]
     closed = pts[ring]
     cuts = np.concatenate([cidx - offset, [n]])
     tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
     tips = np.vstack([tips, tips[:1]])
-    curves, fits, breaks, corner_list = [], [], [0], []
+    curves, fits, breaks, corner_list, flags = [], [], [0], [], []
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         run = closed[a : b + 1]
         pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
-        chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
-                          param_points=pos, join_tangents=tan, method=method)
+        chain = line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None
+        if chain is None:
+            chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
+                              param_points=pos, join_tangents=tan, method=method, deadline=deadline,
+                              edge_midpoints=True)
+            chain = straighten(chain, run, tolerance) if lines else chain
+        flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))
         corner_list.extend(len(fits) + c for c in chain.corners if c != 0)
         curves.append(chain.curves)
         fits.extend(chain.fits)
         breaks.extend(int(a) + chain.breaks[1:])
-    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list))), offset
+    chain = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list)))
+    chain.lines = flags
+    return chain, offset
+
+
+def _segment_distance(points: NDArray[np.float64], p0: NDArray[np.float64], p3: NDArray[np.float64]):
+    """Distances (n,) of points to the segment p0-p3 and their parameters (n,) on it."""
+    d = p3 - p0
+    length2 = float(d @ d)
+    t = np.clip((points - p0) @ d / length2, 0.0, 1.0) if length2 > 1e-24 else np.zeros(len(points))
+    return np.linalg.norm(points - (p0 + t[:, None] * d), axis=1), t
+
+
+def line_cubic(p0: NDArray[np.float64], p3: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The straight segment p0-p3 as a cubic (degree-elevated line), shape (4, D)."""
+    return np.stack([p0, p0 + (p3 - p0) / 3.0, p0 + 2.0 * (p3 - p0) / 3.0, p3])
+
+
+def line_chain(points, p0, p3, tolerance: float) -> ChainFit | None:
+    """One straight piece p0-p3 when every point lies within the tolerance of it, else None."""
+    err, t = _segment_distance(np.asarray(points, dtype=float), p0, p3)
+    if err.max() > tolerance * SAFETY:
+        return None
+    fit = CubicFit(line_cubic(p0, p3), t, err, "line")
+    chain = ChainFit(fit.ctrl[None], [fit], np.array([0, len(points) - 1], dtype=np.int64))
+    chain.lines = [True]
+    return chain
+
+
+def straighten(chain: ChainFit, points: NDArray[np.float64], tolerance: float) -> ChainFit:
+    """Make every piece whose points lie within the tolerance of its chord a straight line.
+
+    A least-squares cubic over a straight pixel edge bulges gently within the tolerance; its
+    chord has the same end points and follows the edge. At a G1 join (not in
+    ``chain.corners``; the chain's own ends count as corners) the chord may turn at most
+    :data:`LINE_KINK` degrees from the join tangent, so a short chord of a round arc never
+    puts a corner into a smooth outline.
+    """
+    lines = list(chain.lines) or [False] * len(chain.fits)
+    sharp = set(chain.corners) | {0, len(chain.fits)}
+    cos_kink = np.cos(np.radians(LINE_KINK))
+    for k, (a, b) in enumerate(zip(chain.breaks[:-1], chain.breaks[1:])):
+        if lines[k]:
+            continue
+        c = chain.curves[k]
+        chord = _unit(c[3] - c[0])
+        t0, t3 = start_tangent(c), end_tangent(c)
+        if chord is None or (k not in sharp and (t0 is None or t0 @ chord < cos_kink)):
+            continue
+        if k + 1 not in sharp and (t3 is None or t3 @ chord < cos_kink):
+            continue
+        line = line_chain(points[a : b + 1], chain.curves[k, 0], chain.curves[k, 3], tolerance)
+        if line is not None:
+            chain.curves[k] = line.curves[0]
+            chain.fits[k] = line.fits[0]
+            lines[k] = True
+    chain.lines = lines
+    return chain
 
 
 def corner_positions(

@@ -42,6 +42,9 @@ class OutlineLoop:
         Independent curves: those of the fitted (fundamental) part for a symmetric loop, the
         rest being its mirrored/rotated copies (the thesis's count, Section 3.1); otherwise
         equal to the number of curves.
+    is_line : list of bool
+        Per curve: True for a straight line segment (its cubic is the degree-elevated line,
+        so readers that ignore the flag still draw it exactly). Empty means all False.
     """
 
     curves: NDArray[np.float64]
@@ -54,10 +57,17 @@ class OutlineLoop:
     corners: int = 0
     symmetry: str | None = None
     fitted_curves: int = -1
+    is_line: list[bool] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.fitted_curves < 0:
             self.fitted_curves = int(len(self.curves))
+        if not self.is_line:
+            self.is_line = [False] * len(self.curves)
+
+    @property
+    def n_lines(self) -> int:
+        return int(sum(self.is_line))
 
     @property
     def n_curves(self) -> int:
@@ -80,6 +90,8 @@ class Drawing:
         Physical scale, when the user gave ``--dpi`` or ``--scale``.
     time_s : float
         Wall time of the trace in seconds.
+    specks : int
+        Loops dropped by despeckling (specks removed and small holes filled).
     """
 
     width: int
@@ -88,6 +100,7 @@ class Drawing:
     tolerance: float
     mm_per_px: float | None = None
     time_s: float = 0.0
+    specks: int = 0
 
     @property
     def n_curves(self) -> int:
@@ -169,16 +182,19 @@ class Drawing:
             "shapes": len(self.shapes()),
             "loops": len(self.loops),
             "curves": self.n_curves,
+            "lines": int(sum(lp.n_lines for lp in self.loops)),
             "fitted_curves": self.n_fitted_curves,
             "max_error_px": self.max_error,
             "mean_error_px": self.mean_error,
             "time_s": self.time_s,
+            "specks_dropped": self.specks,
             "loop_details": [
                 {
                     "shape": lp.shape,
                     "is_hole": lp.is_hole,
                     "depth": lp.depth,
                     "curves": lp.n_curves,
+                    "lines": lp.n_lines,
                     "fitted_curves": lp.fitted_curves,
                     "corners": lp.corners,
                     "max_error_px": lp.max_error,

@@ -17,7 +17,9 @@ from numpy.typing import NDArray
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import points_to_curves
 from pde2cad.curves.parameterize import METHODS
-from pde2cad.curves.piecewise import SAFETY, ChainFit, corner_positions, denoise, fit_chain, fit_closed
+from pde2cad.curves.piecewise import (
+    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed,
+)
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
 from pde2cad.image.corners import CORNER_ANGLE, detect_corners
@@ -30,6 +32,13 @@ _SYMMETRY_GROWTH = 1
 _SYMMETRY_CANDIDATES = 3
 # Loops smaller than this are not worth a symmetry search.
 _SYMMETRY_MIN_POINTS = 40
+#: Most boundary edges (unit cracks) an image may have: tracing costs ~150 bytes per edge,
+#: so this keeps the trace under ~3 GB whatever the image size.
+MAX_EDGES = 20_000_000
+# A lower bound of the fitting time per boundary point (seconds), measured on this
+# project's slowest-to-fastest images (~60-400 us per point): used only to refuse, before
+# any work, an image that cannot finish within ``max_seconds``.
+_SECONDS_PER_POINT = 2e-5
 
 
 def vectorize(
@@ -44,6 +53,8 @@ def vectorize(
     corner_angle: float = CORNER_ANGLE,
     dpi: float | None = None,
     scale: float | None = None,
+    min_area: int = 2,
+    max_seconds: float | None = None,
 ) -> Drawing:
     """Vectorize the boundary of a binary image into cubic Béziers.
 
@@ -68,12 +79,30 @@ def vectorize(
         Minimum turn in degrees (over 4 px) for a corner.
     dpi, scale : float, optional
         Physical size: dots per inch, or millimetres per pixel (give at most one).
+    min_area : int
+        Drop specks and fill holes of at most this many pixels (potrace's turdsize,
+        default 2); 0 keeps everything. ``Drawing.specks`` counts the loops dropped.
+    max_seconds : float, optional
+        Stop with :class:`FitError` when the image cannot be done in this time (checked
+        before tracing from the boundary length, and between and inside loop fits).
 
     Returns
     -------
     Drawing
+
+    Raises
+    ------
+    InputError
+        Bad options, no foreground, or a boundary longer than :data:`MAX_EDGES`.
+    FitError
+        ``max_seconds`` exceeded.
     """
     started = time.perf_counter()
+    deadline = None if max_seconds is None else started + float(max_seconds)
+    if not (isinstance(min_area, (int, np.integer)) and min_area >= 0):
+        raise InputError(f"min_area must be an integer >= 0 (pixels), got {min_area!r}; try 2")
+    if max_seconds is not None and not (np.isfinite(max_seconds) and max_seconds > 0):
+        raise InputError(f"max_seconds must be > 0, got {max_seconds!r}")
     if not (isinstance(tolerance, (int, float)) and np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be a number > 0 (pixels), got {tolerance!r}; try 1.0")
     if parameterization != "optimal" and parameterization not in METHODS:
@@ -94,9 +123,19 @@ def vectorize(
             f"{name} has no foreground pixels after thresholding; "
             "check --threshold or use --invert for light shapes on a dark background"
         )
-    loops = [
-        _fit_loop(c, tolerance, symmetry, g1, parameterization, corner_angle) for c in trace_loops(mask)
-    ]
+    _check_size(mask, name, max_seconds)
+    contours, specks = despeckle(trace_loops(mask), min_area)
+    budget = None if max_seconds is None else max_seconds - (time.perf_counter() - started)
+    if budget is not None and sum(len(c.points) for c in contours) * _SECONDS_PER_POINT > budget:
+        raise _too_slow(name, max_seconds)
+    loops = []
+    try:
+        for c in contours:
+            if deadline is not None and time.perf_counter() > deadline:
+                raise DeadlineExceeded("past the deadline between loops")
+            loops.append(_fit_loop(c, tolerance, symmetry, g1, parameterization, corner_angle, deadline))
+    except DeadlineExceeded:
+        raise _too_slow(name, max_seconds) from None
     return Drawing(
         width=int(mask.shape[1]),
         height=int(mask.shape[0]),
@@ -104,7 +143,89 @@ def vectorize(
         tolerance=float(tolerance),
         mm_per_px=mm_per_px,
         time_s=time.perf_counter() - started,
+        specks=specks,
     )
+
+
+def despeckle(contours: list[ContourLoop], min_area: int) -> tuple[list[ContourLoop], int]:
+    """Drop the loops enclosing at most ``min_area`` pixels (potrace's turdsize).
+
+    Steps: 1. only loops of at most 4 * min_area vertices can enclose that little (an
+    8-connected shape of A pixels has at most 4A boundary edges); 2. their shoelace areas
+    are computed per group of equal length, all loops of a group at once; 3. a dropped outer
+    loop removes a speck, a dropped hole fills it (the holes of a dropped speck are smaller
+    still, so they go with it).
+
+    Returns
+    -------
+    (kept loops, number dropped)
+    """
+    if min_area <= 0:
+        return contours, 0
+    sizes = np.fromiter((len(c.points) for c in contours), dtype=np.int64, count=len(contours))
+    drop = np.zeros(len(contours), bool)
+    for size in np.unique(sizes[sizes <= 4 * min_area]):
+        group = np.flatnonzero(sizes == size)
+        pts = np.stack([contours[i].points for i in group])  # (m, size, 2)
+        nxt = np.roll(pts, -1, axis=1)
+        area = 0.5 * (pts[..., 0] * nxt[..., 1] - nxt[..., 0] * pts[..., 1]).sum(axis=1)
+        drop[group] = np.abs(area) <= min_area
+    kept = [c for c, d in zip(contours, drop.tolist()) if not d]
+    return kept, int(drop.sum())
+
+
+def _check_size(mask: NDArray[np.bool_], name: str, max_seconds: float | None) -> None:
+    """Refuse, before tracing, a mask whose boundary is too long to trace in bounded memory.
+
+    Counts the cracks between foreground and background in row blocks (no full-size
+    temporary beyond one block).
+    """
+    edges = 0
+    rows = max(1, (1 << 22) // max(mask.shape[1], 1))
+    for r in range(0, mask.shape[0], rows):
+        block = mask[r : r + rows + 1]
+        edges += int(np.count_nonzero(block[:-1] != block[1:])) if len(block) > 1 else 0
+        own = mask[r : r + rows]
+        edges += int(np.count_nonzero(own[:, 1:] != own[:, :-1])) + int(own[:, 0].sum() + own[:, -1].sum())
+    edges += int(mask[0].sum() + mask[-1].sum())
+    if edges > MAX_EDGES:
+        raise InputError(
+            f"{name} has {edges:,} boundary edges, more than the limit of {MAX_EDGES:,} "
+            "(the trace would need several GB); this is noise rather than a drawing: "
+            "blur or downscale the image, or raise --threshold/--invert so that only the shapes remain"
+        )
+
+
+def _too_slow(name: str, max_seconds: float | None):
+    from pde2cad.errors import FitError
+
+    return FitError(
+        f"vectorizing {name} would take more than --max-seconds {max_seconds:g} s; raise the "
+        "limit, despeckle more (--min-area) or downscale the image"
+    )
+
+
+def _flag_lines(curves: NDArray[np.float64], slack: float) -> tuple[NDArray[np.float64], list[bool]]:
+    """Replace the cubics that lie within ``slack`` of their chord by the chord, flagged.
+
+    A cubic lies in the hull of its control points, so its distance to the chord is at most
+    that of p1 and p2, and the chord is as close to the cubic: moving to the chord changes
+    both directed distances to the pixel boundary by at most ``slack``.
+    """
+    if slack <= 0 or not len(curves):
+        return curves, [False] * len(curves)
+    p0, p3 = curves[:, 0], curves[:, 3]
+    d = p3 - p0
+    length2 = np.maximum(np.sum(d * d, axis=1), 1e-24)
+    dev = np.zeros(len(curves))
+    for i in (1, 2):
+        t = np.clip(np.sum((curves[:, i] - p0) * d, axis=1) / length2, 0.0, 1.0)
+        dev = np.maximum(dev, np.linalg.norm(curves[:, i] - (p0 + t[:, None] * d), axis=1))
+    flat = dev <= slack
+    out = curves.copy()
+    out[flat, 1] = p0[flat] + d[flat] / 3.0
+    out[flat, 2] = p0[flat] + 2.0 * d[flat] / 3.0
+    return out, flat.tolist()
 
 
 def _scale(dpi: float | None, scale: float | None) -> float | None:
@@ -122,19 +243,25 @@ def _scale(dpi: float | None, scale: float | None) -> float | None:
 
 
 def _fit_loop(
-    contour: ContourLoop, tol: float, symmetry: bool, g1: bool, method: str, corner_angle: float
+    contour: ContourLoop, tol: float, symmetry: bool, g1: bool, method: str, corner_angle: float,
+    deadline: float | None = None,
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
-    chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method)
+    chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
+    is_line = list(chain.lines) or [False] * len(curves)
     sym_name = None
     fitted = len(curves)
     if symmetry and len(pts) >= _SYMMETRY_MIN_POINTS and len(curves) > 1:
         found = _fit_symmetric(pts, corners, tol, g1, method, len(curves))
         if found is not None:
             curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
+            curves, is_line = _flag_lines(curves, tol * SAFETY - max_err)
+            if any(is_line):
+                errors = points_to_curves(pts, curves)
+                max_err, mean_err = float(errors.max()), float(errors.mean())
     return OutlineLoop(
         curves=curves,
         is_hole=contour.is_hole,
@@ -146,6 +273,7 @@ def _fit_loop(
         corners=int(n_corners),
         symmetry=sym_name,
         fitted_curves=int(fitted),
+        is_line=is_line,
     )
 
 
@@ -315,7 +443,7 @@ def _fit_run(
             p_start=start_at, p_end=end_at,
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
-            max_pieces=None if budget is None else budget - len(fits),
+            max_pieces=None if budget is None else budget - len(fits), edge_midpoints=True,
         )
         if not chain.ok:
             return None

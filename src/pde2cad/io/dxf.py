@@ -348,8 +348,13 @@ def dxf_document(
             if lost and notes is not None:
                 notes.append(f"offset {offset:g} closes {lost} loop(s) of shape {n}; left out")
             continue
-        for c, hole in loops:
-            _add_loop(msp, c, mode, tol, LAYER_HOLES if hole else LAYER_OUTER, r12)
+        straight = [bool(lp.is_line) and all(lp.is_line) for lp in shape if lp.n_curves > 0]
+        for (c, hole), lines in zip(loops, straight, strict=True):
+            layer = LAYER_HOLES if hole else LAYER_OUTER
+            if lines:  # a loop of straight lines only: one closed polyline of exact edges
+                _add_closed(msp, c[:, 0], r12, layer)
+            else:
+                _add_loop(msp, c, mode, tol, layer, r12)
     _set_extents(doc, drawing, scale)
     return doc
 

@@ -31,12 +31,17 @@ def format_number(x: float, decimals: int = _DECIMALS) -> str:
     return "0" if s in ("-0", "") else s
 
 
-def _loop_path(curves: NDArray[np.float64]) -> str:
-    """Path data ``M x0 y0 C x1 y1 x2 y2 x3 y3 ... Z`` for a closed chain (K, 4, 2)."""
+def _loop_path(curves: NDArray[np.float64], is_line: list[bool] | None = None) -> str:
+    """Path data ``M x0 y0 C x1 y1 x2 y2 x3 y3 ... L x3 y3 ... Z`` for a closed chain
+    (K, 4, 2); curves flagged in ``is_line`` are written as straight ``L`` segments."""
     f = format_number
+    flags = is_line or [False] * len(curves)
     parts = [f"M {f(curves[0, 0, 0])} {f(curves[0, 0, 1])}"]
-    for c in curves:
-        parts.append("C " + " ".join(f"{f(x)} {f(y)}" for x, y in c[1:]))
+    for c, straight in zip(curves, flags):
+        if straight:
+            parts.append(f"L {f(c[3, 0])} {f(c[3, 1])}")
+        else:
+            parts.append("C " + " ".join(f"{f(x)} {f(y)}" for x, y in c[1:]))
     parts.append("Z")
     return " ".join(parts)
 
@@ -74,10 +79,10 @@ def svg_string(drawing: Drawing, fill: str = "#000000", stroke: str | None = Non
         f'<svg xmlns="http://www.w3.org/2000/svg" version="1.1" {size} viewBox="0 0 {w} {h}">',
     ]
     for shape in drawing.shapes():
-        loops = [np.asarray(lp.curves, dtype=float) for lp in shape if lp.n_curves > 0]
+        loops = [lp for lp in shape if lp.n_curves > 0]
         if not loops:
             continue
-        d = " ".join(_loop_path(c) for c in loops)
+        d = " ".join(_loop_path(np.asarray(lp.curves, dtype=float), lp.is_line) for lp in loops)
         lines.append(f'  <path d="{d}" {style}/>')
     lines.append("</svg>")
     return "\n".join(lines) + "\n"
