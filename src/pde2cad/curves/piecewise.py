@@ -40,9 +40,11 @@ _SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
 # The break-point search tries these parameterizations (the two that win most often on
 # pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
 _SEARCH_METHODS = ("chord", "uniform")
-#: Largest turn (degrees) between a straight piece and the tangent of a G1 join next to it;
-#: below it the join still reads as smooth, above it the line would add a corner.
-LINE_KINK = 8.0
+#: Largest turn (degrees) between a straight piece and the tangent of a G1 join next to it.
+#: Not 8: short chords of round arcs (a 25-px circle at 1 px) passed, and their few-degree
+#: kinks split a circle's DXF spline at a corner and show as facets on a laser cut. A real
+#: straight edge that meets a round part at a G1 join turns by well under 2 degrees there.
+LINE_KINK = 2.0
 
 
 class DeadlineExceeded(FitError):
