@@ -168,7 +168,7 @@ def build_report(
         i, j = e["faces"]
         pair = [face_labels[i], face_labels[j]]
         if all(p is not None for p in pair):
-            pair = sorted(pair)  # type: ignore[type-var]
+            pair = sorted(pair)
         entry: dict[str, Any] = {
             "labels": pair,
             "faces": [int(i), int(j)],
@@ -203,7 +203,7 @@ def build_report(
         patch = rec.patches[label]
         quick = None if orthogonal else getattr(patch, "fit_errors", None)
         err = patch.errors if quick is None else quick
-        entry: dict[str, Any] = {
+        row: dict[str, Any] = {
             "label": label,
             "points": int(len(patch.points)),
             "sides": int(len(patch.sides)),
@@ -211,9 +211,9 @@ def build_report(
         }
         for key in ("mean", "max", "rms", "mean_orthogonal", "max_orthogonal"):
             if key in err:
-                entry[key] = float(err[key])
-                entry[f"{key}_rel"] = float(err[key]) / diagonal
-        patches.append(entry)
+                row[key] = float(err[key])
+                row[f"{key}_rel"] = float(err[key]) / diagonal
+        patches.append(row)
 
     info = rec.sew_info
     summary = {

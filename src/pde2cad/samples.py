@@ -534,6 +534,7 @@ class _BezierPatches:
             (pts,) = self.derivs(p, u, v)
             self._tree = cKDTree(pts)
             self._seeds = np.column_stack([p, u, v])
+        assert self._seeds is not None  # built with the tree just above
         _, idx = self._tree.query(q, k=seeds)
         idx = idx.reshape(len(q), -1)
         best = np.full(len(q), np.inf)
@@ -634,10 +635,11 @@ def teapot(
     for k, count in enumerate(counts):
         if count == 0:
             continue
-        uv = _accept(
-            rng, int(count), lambda m: rng.random((m, 2)),
-            lambda c, k=k: surf.jacobian(np.full(len(c), k), c), 1.02 * bounds[k],
-        )
+
+        def area(c: NDArray[np.float64], k: int = k) -> NDArray[np.float64]:
+            return surf.jacobian(np.full(len(c), k), c)
+
+        uv = _accept(rng, int(count), lambda m: rng.random((m, 2)), area, 1.02 * bounds[k])
         (p,) = surf.derivs(np.full(len(uv), k), uv[:, 0], uv[:, 1])
         pts.append(p)
         labels.append(np.full(len(uv), ids[k]))

@@ -22,7 +22,7 @@ import FreeCAD  # noqa: F401  (initialises the application before Part)
 import numpy as np
 import Part
 import Sketcher
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pde2cad.errors import InputError
 from pde2cad.image.drawing import Drawing
@@ -66,7 +66,7 @@ def drawing_mm(drawing: Drawing, mm_per_px: float) -> list[NDArray[np.float64]]:
 
 
 # --------------------------------------------------------------------------- untangling
-def _bezier(c: NDArray[np.float64], t: NDArray[np.float64], d: int = 0) -> NDArray[np.float64]:
+def _bezier(c: NDArray[np.float64], t: ArrayLike, d: int = 0) -> NDArray[np.float64]:
     """Points (``d = 0``) or first derivatives (``d = 1``) of the cubic ``c (4, 2)`` at ``t``."""
     t = np.asarray(t, dtype=float)[..., None]
     if d == 1:

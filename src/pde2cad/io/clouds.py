@@ -176,7 +176,7 @@ def read_ply_properties(path: str | Path, names: tuple[str, ...]) -> NDArray[np.
         try:
             data = np.loadtxt(
                 path, usecols=columns, max_rows=count, ndmin=2,
-                dtype=np.float64, **_ascii_skip(path, offset, skip),
+                dtype=np.float64, skiprows=_ascii_skip(path, offset, skip),
             )  # fmt: skip
         except ValueError as exc:
             raise InputError(f"{path}: cannot read vertex properties {names}: {exc}") from exc
@@ -205,11 +205,11 @@ def read_ply_properties(path: str | Path, names: tuple[str, ...]) -> NDArray[np.
     return np.asarray(data, dtype=np.float64).reshape(count, len(names))
 
 
-def _ascii_skip(path: Path, offset: int, skip: int) -> dict[str, int]:
+def _ascii_skip(path: Path, offset: int, skip: int) -> int:
     """``skiprows`` for :func:`numpy.loadtxt` that jumps the header and ``skip`` data lines."""
     with open(path, "rb") as handle:
         header_lines = handle.read(offset).count(b"\n")
-    return {"skiprows": header_lines + skip}
+    return header_lines + skip
 
 
 # --------------------------------------------------------------------------- text / npy
@@ -328,7 +328,8 @@ def _check_points(points: NDArray[np.float64], path: Path) -> NDArray[np.float64
 def _sample_mesh(path: Path, sample_points: int) -> NDArray[np.float64]:
     import open3d as o3d
 
-    mesh = o3d.io.read_triangle_mesh(str(path))
+    # open3d 0.20's stubs say os.PathLike, but its binding (and open3d 0.18's) takes str.
+    mesh = o3d.io.read_triangle_mesh(str(path))  # type: ignore[arg-type]
     if len(mesh.triangles) == 0:
         raise InputError(f"{path} holds no triangles (empty or unreadable mesh); check the file")
     if sample_points < 1:
@@ -399,7 +400,9 @@ def read_cloud(
     elif suffix in (".ply", ".pcd"):
         import open3d as o3d
 
-        points = np.asarray(o3d.io.read_point_cloud(str(path)).points, dtype=np.float64)
+        # open3d 0.20's stubs say os.PathLike, but its binding (and open3d 0.18's) takes str.
+        cloud = o3d.io.read_point_cloud(str(path))  # type: ignore[arg-type]
+        points = np.asarray(cloud.points, dtype=np.float64)
         if label_kind == "property":
             if suffix != ".ply":
                 raise InputError(
@@ -501,10 +504,10 @@ def preprocess(
         import open3d as o3d
 
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-        _, keep = pcd.remove_statistical_outlier(
+        _, kept = pcd.remove_statistical_outlier(
             nb_neighbors=int(outlier_nb), std_ratio=float(outlier_std)
         )
-        keep = np.asarray(keep, dtype=np.int64)
+        keep = np.asarray(kept, dtype=np.int64)
         pts = pts[keep]
         lab = None if lab is None else lab[keep]
     if voxel is not None:
@@ -532,9 +535,10 @@ def _voxel_down(
     sums = np.stack([np.bincount(group, pts[:, d], minlength=n_group) for d in range(3)], axis=1)
     first = np.full(n_group, len(pts), dtype=np.int64)
     np.minimum.at(first, group, np.arange(len(pts)))
-    g_cell, g_lab = cell[first], (None if lab is None else lab[first])
+    g_cell = cell[first]
     if lab is None:
         return sums / counts[:, None], None
+    g_lab = lab[first]
     # Sort groups by voxel, then count descending, then label ascending: first per voxel wins.
     order = np.lexsort((g_lab, -counts, g_cell))
     winner = order[np.r_[True, np.diff(g_cell[order]) != 0]]

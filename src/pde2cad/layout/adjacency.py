@@ -242,8 +242,8 @@ class _Voxels:
             pos = self.table[want]
             found = pos >= 0
             return np.where(found, pos, 0).astype(np.int64), found
-        pos = np.minimum(np.searchsorted(self.key, want), len(self.key) - 1)
-        return pos, self.key[pos] == want
+        near = np.minimum(np.searchsorted(self.key, want), len(self.key) - 1)
+        return near, self.key[near] == want
 
 
 def _voxels(pts: NDArray[np.float64], size: float) -> _Voxels:

@@ -476,12 +476,12 @@ def _patch_terms(
                     data.fixed[k, 0, i] = edge.fixed[0, t]
                     data.fixed[k, 1, i] = sgn * edge.fixed[1, t]
             for e, u, c in edge.terms:
-                row, t = np.unravel_index(e, edge.shape)
-                i = t if forward else nodes - 1 - t
-                if 0 < i < nodes - 1 and row < 2:
-                    data.add((k, int(row), int(i)), u, c if row == 0 else sgn * c)
+                row, col = np.unravel_index(e, edge.shape)
+                node = col if forward else nodes - 1 - col
+                if 0 < node < nodes - 1 and row < 2:
+                    data.add((k, int(row), int(node)), u, c if row == 0 else sgn * c)
                 elif row == 2:
-                    targets.add((k, 1, 0 if i == 0 else 1), u, sgn * c)
+                    targets.add((k, 1, 0 if node == 0 else 1), u, sgn * c)
             if edge.shape[0] == 3:
                 for end, i in ((0, 0), (1, nodes - 1)):
                     t = i if forward else nodes - 1 - i
@@ -584,10 +584,11 @@ def _fit(
 
 
 def _bicubic(
-    bilinear: BilinearCoons, nodes: NDArray[np.float64], sides: bool = True
+    bilinear: BilinearCoons | BicubicCoons, nodes: NDArray[np.float64], sides: bool = True
 ) -> BicubicCoons:
-    """Bicubic Coons base on ``bilinear``'s sides (or on zero sides of dimension D) with the
-    ribbons of the inward node data ``nodes`` (S, 2, NODES, D), S = 3 or 4 sides."""
+    """Bicubic Coons base on the sides of ``bilinear`` (a bilinear or bicubic base; or on zero
+    sides of dimension D) with the ribbons of the inward node data ``nodes`` (S, 2, NODES, D),
+    S = 3 or 4 sides."""
     curves = [bilinear.bottom, bilinear.right, bilinear.top, bilinear.left]
     if not sides:
         dim = nodes.shape[-1]
@@ -596,8 +597,10 @@ def _bicubic(
     rib = _to_ribbons(
         [(nodes[k, 0], nodes[k, 1]) for k in range(n_sides)], curves[3], curves[1]
     )
+    bottom, right, top, left = curves
     return BicubicCoons(
-        *curves, rib.d_bottom, rib.d_right, rib.d_top, rib.d_left, twists=rib.twists
+        bottom, right, top, left, rib.d_bottom, rib.d_right, rib.d_top, rib.d_left,
+        twists=rib.twists,
     )
 
 

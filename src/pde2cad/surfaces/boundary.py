@@ -12,7 +12,7 @@ patch, and a single point for the degenerate side of a 3-sided patch (Fig. 5.11)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -53,6 +53,9 @@ class PiecewiseBezier:
 
     ctrl: NDArray[np.float64]
     breaks: NDArray[np.float64]
+    # Derived in __post_init__ (power coefficients): not constructor arguments.
+    _coef_matrix: NDArray[np.float64] = field(init=False, repr=False)
+    _coef: NDArray[np.float64] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         ctrl = np.array(self.ctrl, dtype=float)
@@ -213,7 +216,7 @@ class PiecewiseBezier:
                 # piece in one contraction, then each point keeps its own piece. einsum
                 # rather than @, as a threaded BLAS is slower than the work itself for an
                 # inner dimension of 4.
-                pieces = np.einsum("nj,jk->nk", monomials(t, r), self._coef_matrix)  # type: ignore[attr-defined]
+                pieces = np.einsum("nj,jk->nk", monomials(t, r), self._coef_matrix)
                 if k_count == 1:
                     out[r] = pieces
                 else:
@@ -221,7 +224,7 @@ class PiecewiseBezier:
         else:
             # Many points on a chain of many cubics: gather each point's own coefficients
             # once (cost independent of K) and sum the same monomial terms.
-            cd = self._coef[k]  # type: ignore[attr-defined]  # (n, 4, D)
+            cd = self._coef[k]  # (n, 4, D)
             for r in range(order + 1):
                 mono = monomials(t, r)
                 acc = out[r]

@@ -32,6 +32,7 @@ derivatives and second derivatives share one code path.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -792,7 +793,8 @@ def estimate_cross_derivatives(
                 start = first + rib_cols + (p - 2) * n_basis
                 cols[:, start : start + n_basis] = w**p * basis
             # Reduce each band to its small triangular factor: the joint problem is then tiny.
-            r = np.linalg.qr(np.hstack([cols, rhs]), mode="r")
+            # mode="r" returns the bare R array; numpy's stubs type every mode as QRResult.
+            r = cast(NDArray[np.float64], np.linalg.qr(np.hstack([cols, rhs]), mode="r"))
             r_full = np.zeros((r.shape[0], n_cols))
             r_full[:, used] = r[:, : len(used)]
             blocks.append((r_full, r[:, len(used) :]))
@@ -819,7 +821,7 @@ def estimate_cross_derivatives(
             for (i, j), slope in zip(corner_ij, (slopes[0], slopes[-1]), strict=True):
                 twist_sum[i, j] += 0.5 * slope
         ribbons[name] = PiecewiseBezier.from_hermite(values, slopes, breaks)
-    twists = sol[:4].reshape(2, 2, dim) if match_corners else twist_sum
+    twists = np.asarray(sol[:4].reshape(2, 2, dim) if match_corners else twist_sum, dtype=float)
     return Ribbons(
         d_bottom=ribbons["bottom"],
         d_right=ribbons["right"],

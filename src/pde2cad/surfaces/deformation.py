@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, TypeVar
+from typing import Any, Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -100,7 +100,7 @@ def sine_basis(t: ArrayLike, count: int, kind: Kind, order: int = 0) -> NDArray[
             return -(freq**2) * np.sin(angle)
     elif kind == "c1":
         # sin^2 x = (1 - cos 2x) / 2 keeps the derivatives in closed form.
-        angle = 2.0 * t[..., None] * freq
+        angle = t[..., None] * (2.0 * freq)  # exact: 2x only shifts the exponent
         if order == 0:
             return 0.5 * (1.0 - np.cos(angle))
         if order == 1:
@@ -353,10 +353,10 @@ def _single_threaded_blas() -> Iterator[None]:
         yield
 
 
-_CONTROLLER: list[object] = []
+_CONTROLLER: list[Any] = []  # threadpoolctl is untyped
 
 
-def _blas_controller() -> object | None:
+def _blas_controller() -> Any:
     """One threadpoolctl controller for the process (or None without threadpoolctl).
 
     Creating one scans every loaded shared library (about 2 ms); the BLAS numpy uses is
@@ -577,7 +577,7 @@ def _residual_pass(
         return _project_residuals(fu, fv, left) if normal else None
 
     parts = _chunk_map(chunk, r.shape[0])
-    back = np.sum(parts, axis=0) if normal else None
+    back = np.sum([b for b in parts if b is not None], axis=0) if normal else None
     return norms, back
 
 
@@ -622,11 +622,11 @@ def _solve(
     def solve(b: NDArray[np.float64]) -> NDArray[np.float64]:
         if ridge == 0.0 and near_singular:
             # Only reachable with ridge=0 forced: the minimum-norm answer, not Cholesky noise.
-            return np.linalg.lstsq(system, b, rcond=None)[0]
+            return np.asarray(np.linalg.lstsq(system, b, rcond=None)[0], dtype=float)
         try:
             return cho_solve(cho_factor(system, check_finite=False), b, check_finite=False)
         except np.linalg.LinAlgError:
-            return np.linalg.lstsq(system, b, rcond=None)[0]
+            return np.asarray(np.linalg.lstsq(system, b, rcond=None)[0], dtype=float)
 
     coef = solve(rhs)
     n_full = n + 1 if flat_top else n

@@ -533,7 +533,7 @@ def fit_patch(
             # A 3-sided patch's points thin out towards its collapsed top (density ~ 1 - v in
             # the parameters): many terms oscillate there unseen by the held-out points
             # (teapot bottom, C1 at 12 terms: 7.5e-2 of the diagonal near the apex).
-            candidates = AUTO_TERMS_THREE_SIDED if len(sides) == 3 else AUTO_TERMS
+            candidates: tuple[int, ...] = AUTO_TERMS_THREE_SIDED if len(sides) == 3 else AUTO_TERMS
             if len(pts) > AUTO_DENSE_POINTS:
                 candidates = tuple(k for k in candidates if k <= AUTO_DENSE_TERMS)
             m = n = select_terms(

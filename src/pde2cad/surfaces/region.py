@@ -409,7 +409,7 @@ def boundary_loop(
     grow = alpha is None if retry is None else retry
     alpha0 = default_alpha(pts) if alpha is None else float(alpha)
     whole = None  # (triangles, circumradii) of all points, computed at most once
-    problem = ""
+    problem: str | None = ""
     for attempt in range(ALPHA_RETRIES + 1 if grow else 1):
         a = alpha0 * ALPHA_GROWTH**attempt
         band = _band(pts, a) if len(pts) > BAND_POINTS else None
@@ -689,10 +689,10 @@ def refine_corners(
     for j, c in enumerate(corners):  # 3-4 corners
         ahead = (arc[:-1] - arc[c]) % perimeter  # arc length from the corner, forwards
         behind = (arc[c] - arc[:-1]) % perimeter
-        lines = [_tangent_at_zero(loop, dist, reach) for dist in (behind, ahead)]
-        if lines[0] is None or lines[1] is None:
+        before, after = (_tangent_at_zero(loop, dist, reach) for dist in (behind, ahead))
+        if before is None or after is None:
             continue
-        (p, d), (q, e) = lines
+        (p, d), (q, e) = before, after
         b = float(d @ e)
         if abs(b) > np.cos(np.radians(min_angle)):
             continue
