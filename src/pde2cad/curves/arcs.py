@@ -312,7 +312,7 @@ def _straight(c: NDArray[np.float64]) -> list[Segment] | None:
     u_ctrl = ext @ dn
     co = power_coefficients(u_ctrl[:, None])[:, 0]
     # u'(t) = co1 + 2 co2 t + 3 co3 t^2
-    roots = np.roots([3.0 * co[3], 2.0 * co[2], co[1]]) if np.any(co[1:] != 0) else []
+    roots = np.roots([3.0 * co[3], 2.0 * co[2], co[1]]) if np.any(co[1:] != 0) else np.zeros(0)
     ts = sorted(
         float(r.real)
         for r in np.atleast_1d(roots)

@@ -55,6 +55,7 @@ def _basis(batch: Batch):
     if tan0 is None and tan3 is None:
         return p0 + chord / 3.0, p3 - chord / 3.0, np.concatenate([eye, zero_dd], 2), np.concatenate([zero_dd, eye], 2)
     if tan3 is None:
+        assert tan0 is not None  # both None returned above
         return (p0 + prior * tan0, p3 - chord / 3.0,
                 np.concatenate([tan0[:, :, None], zero_dd], 2), np.concatenate([zero_d1, eye], 2))
     if tan0 is None:
@@ -67,9 +68,10 @@ def _basis(batch: Batch):
 def _solve(h: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float64]:
     """Batched solve of ``h x = rhs`` (B, k, k) x (B, k), minimum norm where singular."""
     try:
-        return np.linalg.solve(h, rhs[..., None])[..., 0]
+        x = np.linalg.solve(h, rhs[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        return (np.linalg.pinv(h) @ rhs[..., None])[..., 0]
+        x = (np.linalg.pinv(h) @ rhs[..., None])[..., 0]
+    return np.asarray(x, dtype=np.float64)
 
 
 def fit_batch(

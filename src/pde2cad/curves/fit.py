@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pde2cad.curves import bezier
 from pde2cad.curves.parameterize import METHODS
@@ -78,6 +78,7 @@ def _constraint_basis(
     if tan0 is None and tan3 is None:
         return p0 + chord_vec / 3.0, p3 - chord_vec / 3.0, np.hstack([eye, zeros]), np.hstack([zeros, eye])
     if tan3 is None:
+        assert tan0 is not None  # both None returned above
         return (p0 + prior_len * tan0, p3 - chord_vec / 3.0,
                 np.hstack([tan0[:, None], zeros]), np.hstack([np.zeros((dim, 1)), eye]))
     if tan0 is None:
@@ -191,7 +192,8 @@ def fit_with_parameters(
     # vector operations whatever the dimension.
     l11, l12, l22 = lin1.T @ lin1, lin1.T @ lin2 + lin2.T @ lin1, lin2.T @ lin2
 
-    def state(t_: NDArray[np.float64], x_: NDArray[np.float64]):
+    def state(t_: ArrayLike, x_: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        t_, x_ = np.asarray(t_, dtype=float), np.asarray(x_, dtype=float)
         s_ = 1.0 - t_
         a_, b_ = 3.0 * t_ * s_ * s_, 3.0 * t_ * t_ * s_
         p1_, p2_ = base1 + lin1 @ x_, base2 + lin2 @ x_

@@ -105,7 +105,8 @@ def end_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 def start_tangent(ctrl: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Unit tangent at the start of a cubic (None for a degenerate curve)."""
-    return end_tangent(ctrl[::-1]) * -1.0 if end_tangent(ctrl[::-1]) is not None else None
+    back = end_tangent(ctrl[::-1])
+    return None if back is None else -back
 
 
 class _Fitter:
@@ -158,8 +159,8 @@ class _Fitter:
         dim = pts.shape[2]
         batch = batchfit.Batch(
             pts, valid,
-            np.broadcast_to(p0, (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
-            None if tan0 is None else np.broadcast_to(_unit(tan0), (m * nm, dim)),
+            np.broadcast_to(np.asarray(p0, dtype=float), (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
+            None if tan0 is None else np.broadcast_to(np.asarray(_unit(tan0), dtype=float), (m * nm, dim)),
             None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
         )
         ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
@@ -541,7 +542,9 @@ def fit_closed(
     cuts = np.concatenate([cidx - offset, [n]])
     tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
     tips = np.vstack([tips, tips[:1]])
-    curves, fits, breaks, corner_list, flags = [], [], [0], [], []
+    curves: list[NDArray[np.float64]] = []
+    fits: list[CubicFit] = []
+    breaks, corner_list, flags = [0], [], []
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         run = closed[a : b + 1]
         pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))

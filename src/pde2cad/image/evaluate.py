@@ -142,7 +142,8 @@ def _bez_d2(c: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float6
 def _stack_curves(curves_list: list[ArrayLike] | ArrayLike) -> NDArray[np.float64]:
     if isinstance(curves_list, np.ndarray) and curves_list.ndim == 3:
         curves_list = [curves_list]
-    arrs = [np.asarray(c, dtype=float).reshape(-1, 4, 2) for c in curves_list]
+    items: list[ArrayLike] = list(curves_list)  # type: ignore[arg-type]  # a sequence of (K, 4, 2)
+    arrs = [np.asarray(c, dtype=float).reshape(-1, 4, 2) for c in items]
     arrs = [a for a in arrs if len(a)]
     return np.concatenate(arrs, axis=0) if arrs else np.zeros((0, 4, 2))
 

@@ -92,8 +92,7 @@ def read_image(
                     raise _too_large(p, (width, height))
                 try:
                     im.load()
-                    im = _apply_exif_orientation(im)
-                    return _mask_from_pil(im, threshold, invert)
+                    return _mask_from_pil(_apply_exif_orientation(im), threshold, invert)
                 except (OSError, SyntaxError) as exc:
                     # Truncated or corrupt data surfaces from the decoders as OSError.
                     raise InputError(

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import points_to_curves
+from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
     SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed,
@@ -431,7 +432,9 @@ def _fit_run(
     when some piece cannot meet the tolerance (the symmetry is then not worth it).
     ``cut_points`` are the corners' positions (default: their points in ``run``)."""
     cuts = np.r_[0, local_corners, len(run) - 1].astype(int)
-    curves, fits, breaks = [], [], [0]
+    curves: list[NDArray[np.float64]] = []
+    fits: list[CubicFit] = []
+    breaks = [0]
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         sub = run[a : b + 1]
         pos, tan = denoise(sub, closed=False, pos_window=7 * copies, tan_window=17 * copies)

@@ -76,11 +76,16 @@ _MM_PER_UNIT = {
 class SurfaceLike(Protocol):
     """The attributes of a B-spline surface this adapter reads (full clamped knot vectors)."""
 
-    poles: Any
-    knots_u: Any
-    knots_v: Any
-    degree_u: int
-    degree_v: int
+    @property
+    def poles(self) -> Any: ...
+    @property
+    def knots_u(self) -> Any: ...
+    @property
+    def knots_v(self) -> Any: ...
+    @property
+    def degree_u(self) -> int: ...
+    @property
+    def degree_v(self) -> int: ...
 
 
 @dataclass(frozen=True)
