@@ -112,6 +112,7 @@ _RECONSTRUCT_SUFFIXES = {
     "iges": (".igs", ".iges"),
     "report": (".json",),
     "preview": (".png", ".svg", ".pdf"),
+    "labels_out": (".npy", ".txt"),
 }
 #: PLY vertex properties tried, in order, when ``--labels`` is not given.
 _LABEL_PROPERTIES = (
@@ -143,7 +144,8 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
         "closed) and write STEP (and IGES). The written STEP is read back and its seams "
         "measured for the summary and the report.",
     )
-    p.add_argument("cloud", help="point cloud: .ply, .pcd, .xyz, .pts, .txt, .csv or .npy")
+    p.add_argument("cloud", help="point cloud (.ply, .pcd, .xyz, .pts, .txt, .csv, .npy) or mesh "
+                   "(.off, .stl, .obj, .ply with faces)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.step",
                    help="STEP file to write (.step or .stp)")
     p.add_argument("--labels", metavar="NAME|FILE",
@@ -176,6 +178,19 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--freecad-check", action="store_true",
                    help="also read the STEP with FreeCAD 0.20 (its own process) and report its "
                    "validity, solids, free edges, gaps and normal angles")
+    p.add_argument("--layout", choices=["labels", "auto"],
+                   help="patch layout: 'labels' (from --labels or the PLY's label property) or "
+                   "'auto' (a coarse quad remesh of the surface; the default for meshes and "
+                   "clouds without labels)")
+    p.add_argument("--crease-angle", type=_positive, default=30.0, metavar="DEG",
+                   help="auto layout: dihedral angle above which an edge is a crease (default 30)")
+    p.add_argument("--patches", type=int, metavar="N",
+                   help="auto layout: about N patches (default: from curvature and point count)")
+    p.add_argument("--patch-size", type=_positive, metavar="L",
+                   help="auto layout: about this patch side length in point units")
+    p.add_argument("--labels-out", metavar="FILE.npy",
+                   help="auto layout: write the labels (.npy/.txt; for a mesh input x, y, z, "
+                   "label rows to rerun with --labels column4), to edit and rerun")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary")
     p.set_defaults(run=_run_reconstruct)
 
@@ -223,6 +238,37 @@ def _label_property(path: Path) -> str:
         f"{path} has no label property (vertex properties: {', '.join(props) or 'none'}); "
         "name it with --labels NAME or pass a label file with --labels FILE.npy"
     )
+
+
+def _wants_auto(args: argparse.Namespace) -> bool:
+    """Whether to lay the patches out automatically: asked for, or no labels to be had."""
+    from pde2cad.io.clouds import _ply_has_faces, _ply_header
+
+    if args.layout is not None:
+        return args.layout == "auto"
+    if args.labels is not None:
+        return False
+    path = Path(args.cloud)
+    if path.suffix.lower() != ".ply" or not path.is_file() or path.stat().st_size == 0:
+        return path.is_file() and path.stat().st_size > 0
+    if _ply_has_faces(path):
+        return True
+    _, elements, _ = _ply_header(path)
+    props = [n for e in elements if e[0] == "vertex" for n, kind in e[2] if kind != "list"]
+    return not any("label" in n.lower() or "segment" in n.lower() or n in _LABEL_PROPERTIES
+                   for n in props)
+
+
+def _auto_reconstruct(args: argparse.Namespace, kwargs: dict[str, Any],
+                      progress: Any) -> tuple[Any, Any, Any]:
+    """Read a mesh or unlabelled cloud, lay it out, reconstruct: (rec, points, layout)."""
+    from pde2cad.io.meshes import read_surface, reconstruct_auto
+
+    surface = read_surface(args.cloud)
+    progress.message(f"read {len(surface.points)} points ({surface.source}); automatic layout")
+    rec, layout = reconstruct_auto(surface, patches=args.patches, patch_size=args.patch_size,
+                                   crease_angle=args.crease_angle, **kwargs)
+    return rec, surface, layout
 
 
 def _read_labelled(args: argparse.Namespace) -> tuple[Any, Any, str]:
@@ -414,28 +460,38 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     progress = _Progress(args.quiet)
     timings: dict[str, float] = {}
 
+    auto = _wants_auto(args)
+    if not auto and (args.patches or args.patch_size or args.labels_out):
+        raise InputError("--patches, --patch-size and --labels-out need the automatic layout; "
+                         "add --layout auto")
     t0 = time.perf_counter()
-    points, labels, source = _read_labelled(args)
-    n_read = len(points)
-    if args.outliers or args.voxel:
-        from pde2cad.io.clouds import preprocess
+    if not auto:
+        points, labels, source = _read_labelled(args)
+        n_read = len(points)
+        if args.outliers or args.voxel:
+            from pde2cad.io.clouds import preprocess
 
-        points, labels = preprocess(points, labels, outlier_nb=20 if args.outliers else None,
-                                    voxel=args.voxel)
-    timings["read"] = time.perf_counter() - t0
-    n_segments = len(set(labels.tolist()))
-    progress.message(f"read {n_read} points ({len(points)} used), {n_segments} segments "
-                     f"(labels from {source})")
+            points, labels = preprocess(points, labels, outlier_nb=20 if args.outliers else None,
+                                        voxel=args.voxel)
+        timings["read"] = time.perf_counter() - t0
+        n_segments = len(set(labels.tolist()))
+        progress.message(f"read {n_read} points ({len(points)} used), {n_segments} segments "
+                         f"(labels from {source})")
 
     from pde2cad.reconstruct import reconstruct
 
     undo = _quiet_occt()
     staging = _Staging()
+    layout = None
     try:
         t0 = time.perf_counter()
         kwargs = _reconstruct_kwargs(reconstruct, args, progress)
         try:
-            rec = reconstruct(points, labels, **kwargs)
+            if auto:
+                rec, surface, layout = _auto_reconstruct(args, kwargs, progress)
+                points, source, n_read = surface.points, "auto layout", len(surface.points)
+            else:
+                rec = reconstruct(points, labels, **kwargs)
         except (Pde2CadError, MemoryError, KeyboardInterrupt):
             raise
         except Exception as exc:  # noqa: BLE001 - a numeric or OCCT failure is still a message
@@ -446,6 +502,11 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
         timings["reconstruct"] = time.perf_counter() - t0
         report = _write_outputs(args, rec, outputs, staging, progress, timings, source, n_read,
                                 len(points))
+        if layout is not None:
+            report["layout"] = layout.summary
+            if "labels_out" in outputs:
+                _write_labels(staging.path(outputs["labels_out"]), points, layout.labels,
+                              surface.source == "mesh")
         timings["total"] = time.perf_counter() - start
         report["timings"].update(timings)
         if "report" in outputs:
@@ -465,10 +526,35 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _write_labels(path: Path, points: Any, labels: Any, with_points: bool) -> None:
+    """Automatic labels, one per point (with x, y, z first for a mesh's sampled points)."""
+    import numpy as np
+
+    data = np.column_stack([points, labels]) if with_points else np.asarray(labels)
+    try:
+        if path.suffix.lower() == ".npy":
+            with open(path, "wb") as fh:
+                np.save(fh, data)
+        else:
+            np.savetxt(path, data, fmt="%.9g" if with_points else "%d")
+    except OSError as exc:
+        raise ExportError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
+def _layout_line(layout: dict[str, Any]) -> str:
+    valence = ", ".join(f"{c} of valence {v}" for v, c in layout["corner_valence"].items())
+    creases = "" if layout.get("creases") is None else f", {layout['creases']} crease edges in input"
+    return (f"layout: auto, {layout['patches']} patches ({layout['faces']['quads']} quads, "
+            f"{layout['faces']['triangles']} triangles), irregular corners: {valence or 'none'}, "
+            f"{layout['components']} component(s){creases}")
+
+
 def _summary(report: dict[str, Any]) -> list[str]:
     from pde2cad.report import summary_lines
 
     lines = summary_lines(report)
+    if report.get("layout"):
+        lines.insert(0, _layout_line(report["layout"]))
     fc = report.get("freecad")
     if fc:
         diagonal = report["summary"].get("diagonal") or 1.0

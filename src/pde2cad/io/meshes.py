@@ -29,9 +29,11 @@ from numpy.typing import NDArray
 from pde2cad.errors import InputError
 from pde2cad.layout.auto import (
     CREASE_ANGLE,
+    TURN_PER_PATCH,
     AutoLayout,
     clean_labels,
     crease_edges,
+    curvature_radius,
     label_points,
     layout_summary,
     quads_of,
@@ -42,9 +44,9 @@ MESH_SUFFIXES = (".off", ".stl", ".obj", ".ply", ".glb", ".gltf")
 MESH_SAMPLES = 100_000
 #: Fewest points an unlabelled input needs (normals, a surface and a few patches).
 MIN_POINTS = 500
-#: Points per patch when the patch count is chosen automatically: enough for the edge bands
-#: and deformation of each patch (the pipeline notes patches under 1000 points as noisy).
-POINTS_PER_PATCH = 2500
+#: Fewest points per patch when the patch count is chosen automatically: enough for the edge
+#: bands and deformation of each patch.
+MIN_POINTS_PER_PATCH = 600
 #: Bounds of the automatic patch count.
 PATCH_RANGE = (12, 400)
 #: Subsample size for the surface mesh of a cloud (normals, Poisson).
@@ -161,20 +163,20 @@ def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDAr
 
     1. At most ``MESH_SUBSAMPLE`` points (every k-th), normals from 20 neighbours, oriented
        consistently over a tangent-plane graph.
-    2. Poisson (depth 8); vertices whose density is in the lowest 2 % (extrapolated far from
-       the points) are removed.
+    2. Poisson (depth 7: the mesh only guides the layout; the patches fit the points),
+       duplicate vertices merged (trimesh). Not trimmed: Instant Meshes returns nothing on
+       the trimmed (holed) meshes tried.
     """
     import open3d as o3d
+    import trimesh
 
     sub = points[:: max(1, len(points) // MESH_SUBSAMPLE)]
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
     pcd.orient_normals_consistent_tangent_plane(12)
-    mesh, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=8)
-    density = np.asarray(density)
-    mesh.remove_vertices_by_mask(density < np.quantile(density, 0.02))
-    mesh.remove_non_manifold_edges()
-    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=7)
+    merged = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles), process=True)
+    return np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)
 
 
 def _quiet_call(func, *args, **kwargs):  # type: ignore[no-untyped-def]
@@ -223,14 +225,24 @@ def quad_remesh(
     )
 
 
-def patch_count(points: NDArray[np.float64], patches: int | None, patch_size: float | None,
-                area: float | None) -> int:
-    """Patches to ask for: ``patches``, or area / size^2, or points / ``POINTS_PER_PATCH``."""
+def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
+                triangles: NDArray[np.int64], patches: int | None, patch_size: float | None,
+                crease_angle: float) -> int:
+    """Patches to ask for: ``patches``; or area / ``patch_size``^2; or by default area / L^2
+    with L = ``TURN_PER_PATCH`` x the surface's small radius of curvature, at least
+    ``PATCH_RANGE[0]``, at most one per ``MIN_POINTS_PER_PATCH`` points and ``PATCH_RANGE[1]``.
+    """
     if patches is not None:
         return int(patches)
-    if patch_size is not None and area is not None:
-        return int(np.clip(area / patch_size**2, 1, PATCH_RANGE[1] * 4))
-    return int(np.clip(len(points) / POINTS_PER_PATCH, *PATCH_RANGE))
+    area = float(np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]),
+                                axis=1).sum() / 2)
+    if patch_size is not None:
+        return int(np.clip(area / patch_size**2, 1, 4 * PATCH_RANGE[1]))
+    side = TURN_PER_PATCH * curvature_radius(vertices, triangles, crease_angle)
+    wanted = area / side**2 if np.isfinite(side) else 0.0
+    most = min(PATCH_RANGE[1], len(points) // MIN_POINTS_PER_PATCH)
+    return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
 
 
 def auto_layout(
@@ -254,12 +266,39 @@ def auto_layout(
     else:
         vertices, tris = surface.vertices, surface.triangles
     assert vertices is not None and tris is not None
-    area = float(np.linalg.norm(np.cross(vertices[tris[:, 1]] - vertices[tris[:, 0]],
-                                         vertices[tris[:, 2]] - vertices[tris[:, 0]]),
-                                axis=1).sum() / 2)
-    count = patch_count(surface.points, patches, patch_size, area)
+    count = patch_count(surface.points, vertices, tris, patches, patch_size, crease_angle)
     q_vertices, faces = quad_remesh(vertices, tris, count, crease_angle)
     labels = clean_labels(surface.points, label_points(surface.points, q_vertices, faces))
     creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
     summary = layout_summary(faces, labels, None if creases is None else len(creases))
     return AutoLayout(labels, q_vertices, faces, summary)
+
+
+#: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
+#: face the pipeline reads with a spurious fifth corner).
+ATTEMPTS = 3
+
+
+def reconstruct_auto(surface: Surface, *, patches: int | None = None,
+                     patch_size: float | None = None, crease_angle: float = CREASE_ANGLE,
+                     **kwargs: object) -> tuple[object, AutoLayout]:
+    """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`; a layout the
+    pipeline rejects (a segment with other than 3 or 4 corners) is remeshed, up to
+    ``ATTEMPTS`` times.
+
+    Returns
+    -------
+    rec : Reconstruction
+    layout : AutoLayout
+    """
+    from pde2cad.reconstruct import reconstruct
+
+    for attempt in range(ATTEMPTS):
+        layout = auto_layout(surface, patches=patches, patch_size=patch_size,
+                             crease_angle=crease_angle)
+        try:
+            return reconstruct(surface.points, layout.labels, **kwargs), layout  # type: ignore[arg-type]
+        except InputError as exc:
+            if "corners" not in str(exc) or attempt == ATTEMPTS - 1:
+                raise InputError(f"the automatic layout failed: {exc}") from exc
+    raise AssertionError("unreachable")

@@ -40,6 +40,11 @@ GRAPH_NEIGHBOURS = 8
 MIN_PATCH_POINTS = 60
 #: Default dihedral angle (degrees) above which an edge of the input mesh is a crease.
 CREASE_ANGLE = 30.0
+#: Percentile of the edge curvatures taken as the surface's (robust) largest curvature.
+CURVATURE_PERCENTILE = 90.0
+#: Patch side over that radius of curvature: a patch turns by at most ~this many radians,
+#: so it stays a height field over its plane (a torus tube in quarters fails, see tests).
+TURN_PER_PATCH = 0.8
 
 
 @dataclass
@@ -212,15 +217,51 @@ def crease_edges(
         Vertex ids of the crease edges.
     """
     tri = np.asarray(triangles, dtype=np.int64)
-    normal = np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]], vertices[tri[:, 2]] - vertices[tri[:, 0]])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    edges, pair = _edge_faces(tri)
+    normal = _normals(vertices, tri)
+    cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
+    return edges[cos < np.cos(np.radians(angle))]
+
+
+def _edge_faces(tri: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Interior edges of a triangle mesh (sorted vertex pairs) and their two faces."""
     edges = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     face = np.repeat(np.arange(len(tri)), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
     e, f = edges[order], face[order]
     pair = np.flatnonzero((e[1:] == e[:-1]).all(axis=1))
-    cos = np.einsum("ij,ij->i", normal[f[pair]], normal[f[pair + 1]])
-    return e[pair[cos < np.cos(np.radians(angle))]]
+    return e[pair], np.column_stack([f[pair], f[pair + 1]])
+
+
+def _normals(vertices: NDArray[np.float64], tri: NDArray[np.int64]) -> NDArray[np.float64]:
+    normal = np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]], vertices[tri[:, 2]] - vertices[tri[:, 0]])
+    return normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+
+
+def curvature_radius(
+    vertices: NDArray[np.float64], triangles: ArrayLike, crease_angle: float = CREASE_ANGLE,
+    percentile: float = CURVATURE_PERCENTILE,
+) -> float:
+    """A small radius of curvature of the smooth part of a mesh (model units).
+
+    1. Per interior edge that is no crease: the angle between its faces' normals over the
+       distance of their centroids (the normal curvature across the edge).
+    2. The ``percentile`` of these curvatures, weighted by edge count (a robust maximum);
+       its inverse is the radius. ``inf`` for a flat or all-crease mesh.
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    _, pair = _edge_faces(tri)
+    normal = _normals(vertices, tri)
+    centroid = vertices[tri].mean(axis=1)
+    cos = np.clip(np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]]), -1.0, 1.0)
+    angle = np.arccos(cos)
+    smooth = angle < np.radians(crease_angle)
+    dist = np.linalg.norm(centroid[pair[:, 0]] - centroid[pair[:, 1]], axis=1)
+    kappa = angle[smooth] / np.maximum(dist[smooth], 1e-300)
+    if len(kappa) == 0:
+        return float("inf")
+    k = float(np.percentile(kappa, percentile))
+    return 1.0 / k if k > 0 else float("inf")
 
 
 def layout_summary(
