@@ -126,9 +126,14 @@ def read_surface(path: str | Path, sample_points: int = MESH_SAMPLES, seed: int 
     import trimesh
 
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # noqa: BLE001 - any parser failure is unreadable input
         raise InputError(f"cannot read {path} as a mesh ({type(exc).__name__}: {exc})") from exc
+    if not np.isfinite(np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))))).all():
+        raise InputError(f"{path} has NaN or inf vertex coordinates; repair the mesh first")
+    if len(getattr(mesh, "faces", ())):
+        # STL keeps each triangle's own corners: merge them so the faces share vertices.
+        mesh.merge_vertices()
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
     tris = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
     _check_mesh(vertices, tris, path)
