@@ -46,7 +46,7 @@ MESH_SAMPLES = 100_000
 MIN_POINTS = 500
 #: Fewest points per patch when the patch count is chosen automatically: enough for the edge
 #: bands and deformation of each patch.
-MIN_POINTS_PER_PATCH = 600
+MIN_POINTS_PER_PATCH = 1000
 #: Bounds of the automatic patch count.
 PATCH_RANGE = (12, 400)
 #: Subsample size for the surface mesh of a cloud (normals, Poisson).

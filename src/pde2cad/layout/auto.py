@@ -44,7 +44,7 @@ CREASE_ANGLE = 30.0
 CURVATURE_PERCENTILE = 90.0
 #: Patch side over that radius of curvature: a patch turns by at most ~this many radians,
 #: so it stays a height field over its plane (a torus tube in quarters fails, see tests).
-TURN_PER_PATCH = 0.8
+TURN_PER_PATCH = 1.0
 
 
 @dataclass
