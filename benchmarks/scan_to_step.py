@@ -172,7 +172,8 @@ def _row(name: str, variant: str, method: str, r: dict[str, Any]) -> str:
         return f"{name:18s} {variant:6s} {method:8s} ERROR {r['error']}"
 
     def f(v: Any, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
+        width = "".join(ch for ch in fmt if ch.isdigit() or ch == ".").split(".")[0]
+        return format("-", f">{width}") if v is None else format(v, fmt)
 
     return (f"{name:18s} {variant:6s} {method:8s} {f(r['patches'], '>4d')} {str(r['valid']):>5s} "
             f"{str(r['closed']):>6s} {f(r['free_edges'], '>4d')} {f(r['gap'], '>8.1e')} "

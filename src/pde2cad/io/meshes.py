@@ -280,16 +280,30 @@ def auto_layout(
 
 
 #: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
-#: face the pipeline reads with a spurious fifth corner).
+#: face the pipeline reads with a spurious corner, or a face that folds at a corner).
 ATTEMPTS = 3
+#: A seam whose faces' normals differ by more than this (degrees) on a surface without
+#: creases is a fold (measured: 174-179 deg on some sphere and ellipsoid layouts, where
+#: the other layouts stay below 4 deg); the layout is then tried again.
+FOLD_ANGLE = 90.0
+
+
+def _fold_angle(rec: object) -> float:
+    """Largest normal angle across the seams of ``rec.shape`` (10 samples per edge)."""
+    from pde2cad.occ.continuity import measure
+
+    return float(measure(rec.shape, 10)["max_angle_deg"])  # type: ignore[attr-defined]
 
 
 def reconstruct_auto(surface: Surface, *, patches: int | None = None,
                      patch_size: float | None = None, crease_angle: float = CREASE_ANGLE,
                      **kwargs: object) -> tuple[object, AutoLayout]:
-    """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`; a layout the
-    pipeline rejects (a segment with other than 3 or 4 corners) is remeshed, up to
-    ``ATTEMPTS`` times.
+    """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`, up to ``ATTEMPTS``
+    layouts.
+
+    1. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
+    2. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
+       folded at a corner) is remeshed too; the result with the smallest such angle is kept.
 
     Returns
     -------
@@ -298,12 +312,22 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     """
     from pde2cad.reconstruct import reconstruct
 
+    best: tuple[float, object, AutoLayout] | None = None
     for attempt in range(ATTEMPTS):
         layout = auto_layout(surface, patches=patches, patch_size=patch_size,
                              crease_angle=crease_angle)
         try:
-            return reconstruct(surface.points, layout.labels, **kwargs), layout  # type: ignore[arg-type]
+            rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
         except InputError as exc:
-            if "corners" not in str(exc) or attempt == ATTEMPTS - 1:
+            if "corners" not in str(exc) or (attempt == ATTEMPTS - 1 and best is None):
                 raise InputError(f"the automatic layout failed: {exc}") from exc
-    raise AssertionError("unreachable")
+            continue
+        if layout.summary.get("creases"):
+            return rec, layout
+        angle = _fold_angle(rec)
+        if best is None or angle < best[0]:
+            best = (angle, rec, layout)
+        if angle <= FOLD_ANGLE:
+            break
+    assert best is not None
+    return best[1], best[2]
