@@ -255,8 +255,9 @@ def _wants_auto(args: argparse.Namespace) -> bool:
         return True
     _, elements, _ = _ply_header(path)
     props = [n for e in elements if e[0] == "vertex" for n, kind in e[2] if kind != "list"]
-    return not any("label" in n.lower() or "segment" in n.lower() or n in _LABEL_PROPERTIES
-                   for n in props)
+    # CloudCompare stores each scalar field as scalar_<name>: one of them may be the labels.
+    return not any("label" in n.lower() or "segment" in n.lower() or n.startswith("scalar_")
+                   or n in _LABEL_PROPERTIES for n in props)
 
 
 def _auto_reconstruct(args: argparse.Namespace, kwargs: dict[str, Any],
