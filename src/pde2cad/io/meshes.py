@@ -132,8 +132,11 @@ def read_surface(path: str | Path, sample_points: int = MESH_SAMPLES, seed: int 
     if not np.isfinite(np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))))).all():
         raise InputError(f"{path} has NaN or inf vertex coordinates; repair the mesh first")
     if len(getattr(mesh, "faces", ())):
-        # STL keeps each triangle's own corners: merge them so the faces share vertices.
+        # STL keeps each triangle's own corners: merge them so the faces share vertices;
+        # merging can leave duplicate and zero-area faces (a tessellated CAD part's STL has
+        # some), which are no surface and would read as non-manifold edges.
         mesh.merge_vertices()
+        mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
     tris = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
     _check_mesh(vertices, tris, path)
