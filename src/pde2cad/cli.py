@@ -302,7 +302,8 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
         "closed) and write STEP (and IGES). The written STEP is read back and its seams "
         "measured for the summary and the report.",
     )
-    p.add_argument("cloud", help="point cloud: .ply, .pcd, .xyz, .pts, .txt, .csv or .npy")
+    p.add_argument("cloud", help="point cloud (.ply, .pcd, .xyz, .pts, .txt, .csv, .npy) or mesh "
+                   "(.off, .stl, .obj, .ply with faces)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.step",
                    help="STEP file to write (.step or .stp)")
     p.add_argument("--labels", metavar="NAME|FILE",
@@ -338,6 +339,19 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", help="product name in the STEP/IGES files (default: the writer's)")
     p.add_argument("--author", help="author recorded in the STEP/IGES header")
     p.add_argument("--organization", help="organization recorded in the STEP/IGES header")
+    p.add_argument("--layout", choices=["labels", "auto"],
+                   help="patch layout: 'labels' (from --labels or the PLY's label property) or "
+                   "'auto' (a coarse quad remesh of the surface; the default for meshes and "
+                   "clouds without labels)")
+    p.add_argument("--crease-angle", type=_positive, default=30.0, metavar="DEG",
+                   help="auto layout: dihedral angle above which an edge is a crease (default 30)")
+    p.add_argument("--patches", type=int, metavar="N",
+                   help="auto layout: about N patches (default: from curvature and point count)")
+    p.add_argument("--patch-size", type=_positive, metavar="L",
+                   help="auto layout: about this patch side length in point units")
+    p.add_argument("--labels-out", metavar="FILE.npy",
+                   help="auto layout: write the labels (.npy/.txt; for a mesh input x, y, z, "
+                   "label rows to rerun with --labels column4), to edit and rerun")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress and no summary")
     p.set_defaults(run=_run_reconstruct)
 
@@ -422,10 +436,20 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _layout_line(layout: dict[str, Any]) -> str:
+    valence = ", ".join(f"{c} of valence {v}" for v, c in layout["corner_valence"].items())
+    creases = "" if layout.get("creases") is None else f", {layout['creases']} crease edges in input"
+    return (f"layout: auto, {layout['patches']} patches ({layout['faces']['quads']} quads, "
+            f"{layout['faces']['triangles']} triangles), irregular corners: {valence or 'none'}, "
+            f"{layout['components']} component(s){creases}")
+
+
 def _summary(report: dict[str, Any]) -> list[str]:
     from pde2cad.report import summary_lines
 
     lines = summary_lines(report)
+    if report.get("layout"):
+        lines.insert(0, _layout_line(report["layout"]))
     fc = report.get("freecad")
     if fc:
         diagonal = report["summary"].get("diagonal") or 1.0

@@ -38,9 +38,11 @@ OUTPUT_SUFFIXES = {
     "iges": (".igs", ".iges"),
     "report": (".json",),
     "preview": (".png", ".svg", ".pdf"),
+    "labels_out": (".npy", ".txt"),
 }
 #: How each output option is spelled on the command line, for the messages.
-OUTPUT_FLAGS = {"output": "-o", "iges": "--iges", "report": "--report", "preview": "--preview"}
+OUTPUT_FLAGS = {"output": "-o", "iges": "--iges", "report": "--report", "preview": "--preview",
+                "labels_out": "--labels-out"}
 #: PLY vertex properties tried, in order, when no label source is given.
 LABEL_PROPERTIES = (
     "label", "labels", "scalar_label", "scalar_Label", "scalar_labels", "scalar_Labels",
@@ -78,6 +80,15 @@ class ReconstructJob:
         Also read the STEP with FreeCAD (its own process) for the report.
     name, author, organization : str, optional
         Product name and header fields of the STEP/IGES files (writer defaults when None).
+    layout : {"labels", "auto"}, optional
+        Where the patches come from: the labels, or an automatic layout of a mesh or an
+        unlabelled cloud (:func:`pde2cad.io.meshes.reconstruct_auto`). Default: ``"auto"``
+        for meshes and clouds that carry no labels, else ``"labels"``.
+    crease_angle, patches, patch_size : optional
+        Automatic layout: crease dihedral angle (degrees), about how many patches, or about
+        what patch side length.
+    labels_out : path, optional
+        Automatic layout: write its labels (``.npy``/``.txt``) to edit and rerun.
     """
 
     cloud: str | Path
@@ -98,6 +109,11 @@ class ReconstructJob:
     name: str | None = None
     author: str | None = None
     organization: str | None = None
+    layout: Literal["labels", "auto"] | None = None
+    crease_angle: float = 30.0
+    patches: int | None = None
+    patch_size: float | None = None
+    labels_out: str | Path | None = None
 
     @classmethod
     def from_options(cls, options: Any) -> ReconstructJob:
@@ -400,6 +416,66 @@ def _read(job: ReconstructJob, message: Message,
     return points, labels, info
 
 
+def wants_auto(job: ReconstructJob) -> bool:
+    """Whether the patches are laid out automatically: asked for, or no labels to be had
+    (a mesh, a cloud format without labels, a PLY with neither faces nor a label-like
+    property)."""
+    from pde2cad.io.clouds import _ply_has_faces, _ply_header
+
+    if job.layout is not None:
+        return job.layout == "auto"
+    if job.labels is not None:
+        return False
+    path = Path(job.cloud)
+    if not path.is_file() or path.stat().st_size == 0:
+        return False  # read_labelled names the problem
+    if path.suffix.lower() != ".ply":
+        return True
+    if _ply_has_faces(path):
+        return True
+    _, elements, _ = _ply_header(path)
+    props = [n for e in elements if e[0] == "vertex" for n, kind in e[2] if kind != "list"]
+    # CloudCompare stores each scalar field as scalar_<name>: one of them may be the labels.
+    return not any("label" in n.lower() or "segment" in n.lower() or n.startswith("scalar_")
+                   or n in LABEL_PROPERTIES for n in props)
+
+
+def _fit_auto(job: ReconstructJob, message: Message, progress: Progress | None,
+              timings: dict[str, float]) -> tuple[Any, Any, Any, dict[str, Any]]:
+    """Steps 2-3 without labels: read the mesh or cloud, lay it out, reconstruct."""
+    from pde2cad.io.clouds import check_cloud_suffix
+    from pde2cad.io.meshes import read_surface, reconstruct_auto
+    from pde2cad.reconstruct import reconstruct
+
+    path = Path(job.cloud)
+    if not path.is_file():
+        raise InputError(f"point cloud file {path} does not exist; check the path")
+    check_cloud_suffix(path)
+    with _stage("read", timings):
+        surface = read_surface(path)
+    message(f"read {len(surface.points)} points ({surface.source}); automatic layout")
+    kwargs = reconstruct_kwargs(reconstruct, job, progress)
+    with _stage("reconstruct", timings):
+        rec, layout = reconstruct_auto(surface, patches=job.patches, patch_size=job.patch_size,
+                                       crease_angle=job.crease_angle, **kwargs)
+    info = {"file": str(job.cloud), "points": len(surface.points),
+            "points_used": len(surface.points), "labels_from": "auto layout"}
+    return rec, surface, layout, info
+
+
+def _write_labels(path: Path, points: Any, labels: Any, with_points: bool) -> None:
+    """Automatic labels, one per point (with x, y, z first for a mesh's sampled points)."""
+    data = np.column_stack([points, labels]) if with_points else np.asarray(labels)
+    try:
+        if path.suffix.lower() == ".npy":
+            with open(path, "wb") as fh:
+                np.save(fh, data)
+        else:
+            np.savetxt(path, data, fmt="%.9g" if with_points else "%d")
+    except OSError as exc:
+        raise ExportError(f"cannot write {path}: {exc.strerror or exc}") from exc
+
+
 def run_reconstruct(job: ReconstructJob, *, progress: Progress | None = None,
                     message: Message | None = None) -> JobResult:
     """Run a whole reconstruct job: read, fit, write, measure, commit (steps 1-5 above).
@@ -432,13 +508,26 @@ def run_reconstruct(job: ReconstructJob, *, progress: Progress | None = None,
     outputs = check_outputs(job)
     _check_environment(job)
     timings: dict[str, float] = {}
-    points, labels, info = _read(job, say, timings)
+    auto = wants_auto(job)
+    if not auto and (job.patches or job.patch_size or job.labels_out):
+        raise InputError("--patches, --patch-size and --labels-out need the automatic layout; "
+                         "add --layout auto")
+    if not auto:
+        points, labels, info = _read(job, say, timings)
     staging = Staging()
     try:
         with quiet_messages():
-            with _stage("reconstruct", timings):
-                rec = _fit(job, points, labels, progress)
+            if auto:
+                rec, surface, layout, info = _fit_auto(job, say, progress, timings)
+            else:
+                with _stage("reconstruct", timings):
+                    rec = _fit(job, points, labels, progress)
             report = _write_outputs(job, rec, outputs, staging, say, timings, info)
+            if auto:
+                report["layout"] = layout.summary
+                if "labels_out" in outputs:
+                    _write_labels(staging.path(outputs["labels_out"]), surface.points,
+                                  layout.labels, surface.source == "mesh")
         timings["total"] = time.perf_counter() - start
         report["timings"].update(timings)
         if "report" in outputs:
@@ -459,4 +548,5 @@ __all__ = [
     "read_labelled",
     "reconstruct_kwargs",
     "run_reconstruct",
+    "wants_auto",
 ]

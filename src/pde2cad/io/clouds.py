@@ -34,7 +34,7 @@ from pde2cad.errors import InputError
 #: Extensions read as text (first three columns x, y, z).
 TEXT_SUFFIXES = (".xyz", ".pts", ".txt", ".csv")
 #: Extensions read as triangle meshes and sampled.
-MESH_SUFFIXES = (".stl", ".obj")
+MESH_SUFFIXES = (".off", ".stl", ".obj")
 #: Extensions of separate label files.
 LABEL_FILE_SUFFIXES = (".npy", ".txt", ".csv", ".labels")
 

@@ -1,0 +1,218 @@
+"""Benchmark: meshes and scans without labels -> STEP (automatic layout) beside open3d Poisson.
+
+Usage (the project's venv python)::
+
+    python benchmarks/scan_to_step.py                 # every case, 3 variants each
+    python benchmarks/scan_to_step.py --cases ellipsoid,torus --variants mesh,noisy
+    python benchmarks/scan_to_step.py --json out.json --continuity c1
+
+Cases, none designed for this project: the STL models shipped by Debian's OpenCASCADE data
+package (``/usr/share/opencascade/data/stl``, when installed), trimesh's analytic primitives
+(an ellipsoid, a torus of genus 1, a capsule) and a filleted box made with build123d (when
+installed) and tessellated. Variants: the mesh itself (faces kept), ``SAMPLES`` clean points
+sampled on it, and those points with Gaussian noise of ``NOISE`` x the diagonal D.
+
+Per case and variant, in a fresh process with a ``--timeout``: ``pde2cad`` (read, automatic
+layout, reconstruction, STEP written and read back) and open3d Poisson (normals from 20
+neighbours, oriented over the tangent-plane graph, depth 8) on the same points. Printed:
+
+* valid / closed (solid) / free edges / max gap over D, from the STEP read back;
+* seam: max normal angle across seams away from irregular corners (deg);
+* in->f: mean distance of the input points to the faces over D (each point to its patch at
+  its fitted parameters: an upper bound of the closest distance);
+* f->in p95: 95th percentile of the distance of face samples (a 40 x 40 grid per patch, or
+  Poisson's vertices) to the true surface (``REFERENCE`` points sampled on the mesh), over D;
+* >1%D: fraction of the input farther than 0.01 D from the faces;
+* time (s, wall).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    import pde2cad  # noqa: F401
+except ImportError:  # plain checkout without an installed package
+    sys.path.insert(0, str(ROOT / "src"))
+
+SAMPLES = 50_000
+NOISE = 0.002
+REFERENCE = 300_000
+OCC_STL = Path("/usr/share/opencascade/data/stl")
+
+
+def _analytic() -> dict[str, Any]:
+    import trimesh
+
+    cases = {
+        "ellipsoid": lambda: trimesh.creation.icosphere(5).apply_scale((1.0, 0.6, 0.35)),
+        "torus": lambda: trimesh.creation.torus(1.0, 0.35, 128, 64),
+        "capsule": lambda: trimesh.creation.capsule(height=1.5, radius=0.5, count=(64, 64)),
+    }
+    try:
+        import build123d as bd
+
+        def filleted_box() -> Any:
+            part = bd.fillet(bd.Box(2, 1.4, 1).edges(), radius=0.2)
+            path = Path(tempfile.mkdtemp()) / "box.stl"
+            bd.export_stl(part, str(path), tolerance=1e-3, angular_tolerance=0.1)
+            return trimesh.load(str(path), force="mesh")
+
+        cases["filleted_box"] = filleted_box
+    except ImportError:
+        pass
+    for path in sorted(OCC_STL.glob("*.stl")) if OCC_STL.is_dir() else []:
+        cases[f"occ_{path.stem}"] = lambda p=path: trimesh.load(str(p), force="mesh")
+    return cases
+
+
+def _input(mesh: Any, variant: str, diagonal: float, work: Path) -> Path:
+    """The file pde2cad reads for a variant: the mesh (OFF) or points (XYZ)."""
+    if variant == "mesh":
+        path = work / "in.off"
+        mesh.export(path)
+        return path
+    import trimesh
+
+    pts = trimesh.sample.sample_surface(mesh, SAMPLES, seed=1)[0]
+    if variant == "noisy":
+        pts = pts + np.random.default_rng(2).normal(scale=NOISE * diagonal / np.sqrt(3), size=pts.shape)
+    path = work / "in.xyz"
+    np.savetxt(path, pts)
+    return path
+
+
+def _ours(path: Path, reference: np.ndarray, diagonal: float, continuity: str) -> dict[str, Any]:
+    from scipy.spatial import cKDTree
+
+    from pde2cad.io.meshes import read_surface, reconstruct_auto
+    from pde2cad.occ import write_step
+    from pde2cad.report import build_report
+
+    from pde2cad.cli import _quiet_occt
+
+    _quiet_occt()
+    t0 = time.perf_counter()
+    surface = read_surface(path, sample_points=SAMPLES)
+    rec, layout = reconstruct_auto(surface, continuity=continuity)
+    step = path.with_suffix(".step")
+    write_step(rec.shape, step)
+    elapsed = time.perf_counter() - t0
+    s = build_report(rec, step, orthogonal=False)["summary"]
+    dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
+                                          axis=1) for p in rec.patches.values()])
+    g = np.linspace(0.0, 1.0, 40)
+    uu, vv = (a.ravel() for a in np.meshgrid(g, g))
+    faces = np.concatenate([p.evaluate(uu, vv) for p in rec.patches.values()])
+    back = cKDTree(reference).query(faces, workers=-1)[0]
+    return {
+        "valid": s["valid"], "closed": s["solid"] or s["closed"], "free_edges": s["free_edges"],
+        "gap": s["max_gap_rel"], "seam": s.get("max_angle_deg_regular", s["max_angle_deg"]),
+        "in_f": float(dist.mean() / diagonal), "f_in95": float(np.percentile(back, 95) / diagonal),
+        "far": float(np.mean(dist > 0.01 * diagonal)), "time": elapsed,
+        "patches": layout.summary["patches"], "stages": rec.timings,
+    }
+
+
+def _poisson(points: np.ndarray, reference: np.ndarray, diagonal: float) -> dict[str, Any]:
+    import open3d as o3d
+    from scipy.spatial import cKDTree
+
+    t0 = time.perf_counter()
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
+    pcd.orient_normals_consistent_tangent_plane(12)
+    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=8)
+    elapsed = time.perf_counter() - t0
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    dist = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+    back = cKDTree(reference).query(np.asarray(mesh.vertices), workers=-1)[0]
+    return {
+        "valid": True, "closed": bool(mesh.is_watertight()), "free_edges": None, "gap": None,
+        "seam": None, "in_f": float(dist.mean() / diagonal),
+        "f_in95": float(np.percentile(back, 95) / diagonal),
+        "far": float(np.mean(dist > 0.01 * diagonal)), "time": elapsed, "patches": None,
+    }
+
+
+def _run(name: str, variant: str, continuity: str, queue: Any) -> None:
+    import trimesh
+
+    mesh = _analytic()[name]()
+    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    reference = trimesh.sample.sample_surface(mesh, REFERENCE, seed=7)[0]
+    work = Path(tempfile.mkdtemp())
+    path = _input(mesh, variant, diagonal, work)
+    out: dict[str, Any] = {}
+    try:
+        out["ours"] = _ours(path, reference, diagonal, continuity)
+    except Exception as exc:  # noqa: BLE001 - a benchmark row, not a crash
+        out["ours"] = {"error": f"{type(exc).__name__}: {str(exc)[:160]}"}
+    pts = np.loadtxt(path) if variant != "mesh" else trimesh.sample.sample_surface(mesh, SAMPLES, seed=1)[0]
+    try:
+        out["poisson"] = _poisson(np.asarray(pts, dtype=float), reference, diagonal)
+    except Exception as exc:  # noqa: BLE001
+        out["poisson"] = {"error": f"{type(exc).__name__}: {exc}"}
+    queue.put(out)
+
+
+def _row(name: str, variant: str, method: str, r: dict[str, Any]) -> str:
+    if "error" in r:
+        return f"{name:18s} {variant:6s} {method:8s} ERROR {r['error']}"
+
+    def f(v: Any, fmt: str) -> str:
+        width = "".join(ch for ch in fmt if ch.isdigit() or ch == ".").split(".")[0]
+        return format("-", f">{width}") if v is None else format(v, fmt)
+
+    return (f"{name:18s} {variant:6s} {method:8s} {f(r['patches'], '>4d')} {str(r['valid']):>5s} "
+            f"{str(r['closed']):>6s} {f(r['free_edges'], '>4d')} {f(r['gap'], '>8.1e')} "
+            f"{f(r['seam'], '>6.2f')} {r['in_f']:>8.1e} {r['f_in95']:>8.1e} {r['far']:>6.3f} "
+            f"{r['time']:>6.1f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cases", help="comma-separated case names (default: all)")
+    parser.add_argument("--variants", default="mesh,clean,noisy")
+    parser.add_argument("--continuity", choices=["c0", "c1"], default="c1")
+    parser.add_argument("--timeout", type=float, default=120.0)
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    names = args.cases.split(",") if args.cases else list(_analytic())
+    print(f"{'case':18s} {'var':6s} {'method':8s} {'pat':>4s} {'valid':>5s} {'closed':>6s} "
+          f"{'free':>4s} {'gap/D':>8s} {'seam':>6s} {'in->f/D':>8s} {'f->in95':>8s} {'>1%D':>6s} "
+          f"{'time':>6s}")
+    results: list[dict[str, Any]] = []
+    ctx = mp.get_context("spawn")
+    for name in names:
+        for variant in args.variants.split(","):
+            queue = ctx.Queue()
+            proc = ctx.Process(target=_run, args=(name, variant, args.continuity, queue))
+            proc.start()
+            proc.join(args.timeout * 4)  # ours, its read-back check and Poisson
+            if proc.is_alive():
+                proc.terminate()
+                out = {"ours": {"error": "timeout"}, "poisson": {"error": "timeout"}}
+            else:
+                out = queue.get() if not queue.empty() else {"ours": {"error": "crashed"},
+                                                              "poisson": {"error": "crashed"}}
+            for method in ("ours", "poisson"):
+                print(_row(name, variant, method, out[method]), flush=True)
+            results.append({"case": name, "variant": variant, **out})
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,337 @@
+"""Meshes and unlabelled clouds in, automatic patch layout out (trimesh, open3d, Instant Meshes).
+
+Adapter module: the layout math is in :mod:`pde2cad.layout.auto` (numpy/scipy); this module
+reads the files and runs the libraries.
+
+1. :func:`read_surface`: an OFF/STL/OBJ/PLY-with-faces mesh (trimesh, connectivity kept,
+   duplicate vertices merged) or a cloud without labels (PLY, PCD, XYZ/PTS/TXT/CSV, NPY via
+   :func:`pde2cad.io.clouds.read_cloud`).
+2. :func:`surface_mesh`: a cloud without faces gets a triangle mesh for the remesher: open3d
+   normals (oriented over a tangent-plane graph) and screened Poisson on a subsample,
+   trimmed where Poisson extrapolated far from the points.
+3. :func:`quad_remesh`: Instant Meshes (``pyinstantmeshes``) makes a coarse pure-quad mesh
+   aligned to the curvature and the creases (``crease_angle``).
+4. :func:`auto_layout`: 1-3 plus :func:`pde2cad.layout.auto.label_points` /
+   :func:`~pde2cad.layout.auto.clean_labels`: one label per point, each a 3- or 4-sided
+   patch, for :func:`pde2cad.reconstruct.reconstruct`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pde2cad.errors import InputError
+from pde2cad.layout.auto import (
+    CREASE_ANGLE,
+    TURN_PER_PATCH,
+    AutoLayout,
+    clean_labels,
+    crease_edges,
+    curvature_radius,
+    label_points,
+    layout_summary,
+    quads_of,
+)
+
+MESH_SUFFIXES = (".off", ".stl", ".obj", ".ply", ".glb", ".gltf")
+#: Points sampled from a mesh input (uniformly by area) to fit the patches to.
+MESH_SAMPLES = 100_000
+#: Fewest points an unlabelled input needs (normals, a surface and a few patches).
+MIN_POINTS = 500
+#: Fewest points per patch when the patch count is chosen automatically: enough for the edge
+#: bands and deformation of each patch.
+MIN_POINTS_PER_PATCH = 1000
+#: Bounds of the automatic patch count.
+PATCH_RANGE = (12, 400)
+#: Subsample size for the surface mesh of a cloud (normals, Poisson).
+MESH_SUBSAMPLE = 60_000
+
+
+@dataclass
+class Surface:
+    """An input surface: its points, and its triangles when it is a mesh.
+
+    Attributes
+    ----------
+    points : (N, 3) float
+        Points to fit (a mesh's are sampled on it).
+    vertices : (V, 3) float or None
+    triangles : (F, 3) int or None
+    source : str
+        ``"mesh"`` or ``"cloud"``.
+    """
+
+    points: NDArray[np.float64]
+    vertices: NDArray[np.float64] | None
+    triangles: NDArray[np.int64] | None
+    source: str
+
+
+def _is_mesh_file(path: Path) -> bool:
+    from pde2cad.io.clouds import _ply_has_faces
+
+    suffix = path.suffix.lower()
+    if suffix == ".ply":
+        return _ply_has_faces(path)
+    return suffix in MESH_SUFFIXES
+
+
+def _check_mesh(vertices: NDArray[np.float64], tris: NDArray[np.int64], path: Path) -> None:
+    """Errors for meshes the layout cannot use: no faces, NaN, non-manifold edges."""
+    if len(tris) == 0:
+        raise InputError(f"{path} holds no faces; pass a mesh with triangles or a point cloud")
+    if not np.isfinite(vertices).all():
+        raise InputError(f"{path} has NaN or inf vertex coordinates; repair the mesh first")
+    edges = np.sort(tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, uses = np.unique(edges, axis=0, return_counts=True)
+    if (uses > 2).any():
+        raise InputError(
+            f"{path} is non-manifold: {int((uses > 2).sum())} edges are shared by more than two "
+            "faces; repair it (e.g. MeshLab 'Repair non Manifold Edges') and retry"
+        )
+
+
+def read_surface(path: str | Path, sample_points: int = MESH_SAMPLES, seed: int = 0) -> Surface:
+    """Read a mesh (keeping its faces) or an unlabelled point cloud.
+
+    Parameters
+    ----------
+    path : str or Path
+    sample_points : int
+        Points sampled on a mesh (uniformly by area).
+    seed : int
+        Seed of the sampling.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, a mesh without faces, NaN coordinates, non-manifold
+        edges, fewer than ``MIN_POINTS`` points, or points on a line or plane-less blob.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"input file {path} does not exist; check the path")
+    if not _is_mesh_file(path):
+        from pde2cad.io.clouds import read_cloud
+
+        points, _ = read_cloud(path)
+        _check_spread(points, path)
+        return Surface(points, None, None, "cloud")
+    import trimesh
+
+    try:
+        # trimesh types load() as a generic Geometry; force="mesh" makes it a Trimesh.
+        mesh: Any = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # noqa: BLE001 - any parser failure is unreadable input
+        raise InputError(f"cannot read {path} as a mesh ({type(exc).__name__}: {exc})") from exc
+    if not np.isfinite(np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))))).all():
+        raise InputError(f"{path} has NaN or inf vertex coordinates; repair the mesh first")
+    if len(getattr(mesh, "faces", ())):
+        # STL keeps each triangle's own corners: merge them so the faces share vertices;
+        # merging can leave duplicate and zero-area faces (a tessellated CAD part's STL has
+        # some), which are no surface and would read as non-manifold edges.
+        mesh.merge_vertices()
+        mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    tris = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    _check_mesh(vertices, tris, path)
+    rng = np.random.default_rng(seed)
+    area = np.linalg.norm(np.cross(vertices[tris[:, 1]] - vertices[tris[:, 0]],
+                                   vertices[tris[:, 2]] - vertices[tris[:, 0]]), axis=1)
+    face = rng.choice(len(tris), size=int(sample_points), p=area / area.sum())
+    r = rng.random((len(face), 2))
+    flip = r.sum(axis=1) > 1
+    r[flip] = 1 - r[flip]
+    a, b, c = (vertices[tris[face, k]] for k in range(3))
+    points = a + r[:, :1] * (b - a) + r[:, 1:] * (c - a)
+    _check_spread(points, path)
+    return Surface(points, vertices, tris, "mesh")
+
+
+def _check_spread(points: NDArray[np.float64], path: Path) -> None:
+    """Too few points, or points on a line: no surface to lay out."""
+    if len(points) < MIN_POINTS:
+        raise InputError(
+            f"{path} has {len(points)} points; an automatic layout needs at least {MIN_POINTS} "
+            "(scan denser, or sample the mesh)"
+        )
+    centred = points - points.mean(axis=0)
+    sv = np.linalg.svd(centred[:: max(1, len(points) // 20000)], compute_uv=False)
+    if sv[1] <= 1e-9 * sv[0]:
+        raise InputError(f"the points of {path} lie on a line; there is no surface to fit")
+
+
+def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """A triangle mesh through a cloud: normals + screened Poisson on a subsample.
+
+    1. At most ``MESH_SUBSAMPLE`` points (every k-th), normals from 20 neighbours, oriented
+       consistently over a tangent-plane graph.
+    2. Poisson (depth 7: the mesh only guides the layout; the patches fit the points),
+       duplicate vertices merged (trimesh). Not trimmed: Instant Meshes returns nothing on
+       the trimmed (holed) meshes tried.
+    """
+    import open3d as o3d
+    import trimesh
+
+    sub = points[:: max(1, len(points) // MESH_SUBSAMPLE)]
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
+    pcd.orient_normals_consistent_tangent_plane(12)
+    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=7)
+    merged = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles), process=True)
+    return np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)
+
+
+def _quiet_call(func, *args, **kwargs):  # type: ignore[no-untyped-def]
+    """Call ``func`` with the C-level stdout silenced (Instant Meshes logs every stage)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        return func(*args, **kwargs)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+
+
+def quad_remesh(
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], patches: int,
+    crease_angle: float = CREASE_ANGLE,
+) -> tuple[NDArray[np.float64], list[tuple[int, ...]]]:
+    """A coarse pure-quad mesh of about ``patches`` faces (Instant Meshes).
+
+    Pure-quad mode subdivides every face of the quad-dominant result into quads, so the
+    remesher is asked for a quarter of the faces. Its deterministic mode returns nothing on
+    some inputs (a torus), so it is not used; an empty result is retried with 1.5x faces.
+    """
+    try:
+        import pyinstantmeshes as pim
+    except ImportError as exc:
+        raise InputError(
+            "the automatic layout needs pyinstantmeshes; install it with: pip install "
+            "pyinstantmeshes (or pass --labels)"
+        ) from exc
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    f = np.ascontiguousarray(triangles, dtype=np.int32)
+    target = max(2, int(round(patches / 4)))
+    for _ in range(3):
+        out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
+                                   crease_angle=float(crease_angle), pure_quad=True)
+        if len(out_f):
+            return np.asarray(out_v, dtype=np.float64), quads_of(out_f)
+        target = int(target * 1.5) + 1
+    raise InputError(
+        "the quad remesher found no layout for this surface; pass labels (--labels) or try "
+        "another --patches count"
+    )
+
+
+def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
+                triangles: NDArray[np.int64], patches: int | None, patch_size: float | None,
+                crease_angle: float) -> int:
+    """Patches to ask for: ``patches``; or area / ``patch_size``^2; or by default area / L^2
+    with L = ``TURN_PER_PATCH`` x the surface's small radius of curvature, at least
+    ``PATCH_RANGE[0]``, at most one per ``MIN_POINTS_PER_PATCH`` points and ``PATCH_RANGE[1]``.
+    """
+    if patches is not None:
+        return int(patches)
+    area = float(np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]),
+                                axis=1).sum() / 2)
+    if patch_size is not None:
+        return int(np.clip(area / patch_size**2, 1, 4 * PATCH_RANGE[1]))
+    side = TURN_PER_PATCH * curvature_radius(vertices, triangles, crease_angle)
+    wanted = area / side**2 if np.isfinite(side) else 0.0
+    most = min(PATCH_RANGE[1], len(points) // MIN_POINTS_PER_PATCH)
+    return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
+
+
+def auto_layout(
+    surface: Surface, *, patches: int | None = None, patch_size: float | None = None,
+    crease_angle: float = CREASE_ANGLE,
+) -> AutoLayout:
+    """One label per point of ``surface``: a coarse quad mesh's faces as patches.
+
+    Parameters
+    ----------
+    surface : Surface
+    patches : int, optional
+        About how many patches (default from the point count).
+    patch_size : float, optional
+        About how long a patch side is (model units); overrides the default count.
+    crease_angle : float
+        Dihedral angle (degrees) above which the remesher aligns to an edge as a crease.
+    """
+    if surface.triangles is None or surface.vertices is None:
+        vertices, tris = surface_mesh(surface.points)
+    else:
+        vertices, tris = surface.vertices, surface.triangles
+    count = patch_count(surface.points, vertices, tris, patches, patch_size, crease_angle)
+    q_vertices, faces = quad_remesh(vertices, tris, count, crease_angle)
+    labels = clean_labels(surface.points, label_points(surface.points, q_vertices, faces))
+    creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
+    summary = layout_summary(faces, labels, None if creases is None else len(creases))
+    return AutoLayout(labels, q_vertices, faces, summary)
+
+
+#: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
+#: face the pipeline reads with a spurious corner, or a face that folds at a corner).
+ATTEMPTS = 3
+#: A seam whose faces' normals differ by more than this (degrees) on a surface without
+#: creases is a fold (measured: 174-179 deg on some sphere and ellipsoid layouts, where
+#: the other layouts stay below 4 deg); the layout is then tried again.
+FOLD_ANGLE = 90.0
+
+
+def _fold_angle(rec: object) -> float:
+    """Largest normal angle across the seams of ``rec.shape`` (10 samples per edge)."""
+    from pde2cad.occ.continuity import measure
+
+    return float(measure(rec.shape, 10)["max_angle_deg"])  # type: ignore[attr-defined]
+
+
+def reconstruct_auto(surface: Surface, *, patches: int | None = None,
+                     patch_size: float | None = None, crease_angle: float = CREASE_ANGLE,
+                     **kwargs: object) -> tuple[object, AutoLayout]:
+    """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`, up to ``ATTEMPTS``
+    layouts.
+
+    1. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
+    2. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
+       folded at a corner) is remeshed too; the result with the smallest such angle is kept.
+
+    Returns
+    -------
+    rec : Reconstruction
+    layout : AutoLayout
+    """
+    from pde2cad.reconstruct import reconstruct
+
+    best: tuple[float, object, AutoLayout] | None = None
+    for attempt in range(ATTEMPTS):
+        layout = auto_layout(surface, patches=patches, patch_size=patch_size,
+                             crease_angle=crease_angle)
+        try:
+            rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
+        except InputError as exc:
+            if "corners" not in str(exc) or (attempt == ATTEMPTS - 1 and best is None):
+                raise InputError(f"the automatic layout failed: {exc}") from exc
+            continue
+        if layout.summary.get("creases"):
+            return rec, layout
+        angle = _fold_angle(rec)
+        if best is None or angle < best[0]:
+            best = (angle, rec, layout)
+        if angle <= FOLD_ANGLE:
+            break
+    assert best is not None
+    return best[1], best[2]

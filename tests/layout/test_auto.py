@@ -1,0 +1,98 @@
+"""Automatic layout core: quad pairing, nearest-face labels, cleaning, creases, curvature."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pde2cad.layout.auto import (
+    clean_labels,
+    crease_edges,
+    curvature_radius,
+    label_points,
+    layout_summary,
+    quads_of,
+)
+
+# A unit cube: 8 corners, 6 quads, each quad as two consecutive triangles (a, b, c), (a, c, d).
+CUBE_V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+CUBE_Q = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+CUBE_T = np.array([t for a, b, c, d in CUBE_Q for t in ((a, b, c), (a, c, d))])
+
+
+def _sphere(n: int, seed: int = 0) -> np.ndarray:
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def test_quads_of_pairs_triangles_into_the_cube_faces() -> None:
+    faces = quads_of(CUBE_T)
+    assert sorted(map(frozenset, faces)) == sorted(map(frozenset, CUBE_Q))
+    # Each quad is a cycle: its 4 sides are cube edges (length 2), no diagonal (2 sqrt 2).
+    for f in faces:
+        sides = [np.linalg.norm(CUBE_V[f[i]] - CUBE_V[f[(i + 1) % 4]]) for i in range(4)]
+        assert np.allclose(sides, 2.0)
+
+
+def test_label_points_on_a_sphere_match_the_cube_faces() -> None:
+    """Cube-sphere truth: a point belongs to the face of its largest |coordinate|."""
+    pts = _sphere(30000)
+    verts = CUBE_V / np.sqrt(3.0)  # cube corners on the sphere; faces cut chords
+    faces = quads_of(CUBE_T)
+    lab = label_points(pts, verts, faces)
+    axis = np.abs(pts).argmax(axis=1)
+    sign = np.sign(pts[np.arange(len(pts)), axis])
+    centre = np.array([np.mean(verts[list(f)], axis=0) for f in faces])
+    truth_face = np.array([np.flatnonzero((np.sign(centre[:, a]) == s) &
+                                          (np.abs(centre[:, a]) > 0.3))[0]
+                           for a, s in zip(axis, sign)])
+    # Away from the borders every label is right (the borders wobble by the point spacing,
+    # ~0.02, where samples snap to points).
+    srt = np.sort(np.abs(pts), axis=1)
+    inner = srt[:, 2] - srt[:, 1] > 0.1
+    assert np.mean(lab[inner] == truth_face[inner]) == 1.0
+    assert np.mean(lab == truth_face) > 0.98
+
+
+def test_clean_labels_gives_islands_to_their_surroundings() -> None:
+    pts = _sphere(20000, seed=1)
+    lab = label_points(pts, CUBE_V / np.sqrt(3.0), quads_of(CUBE_T))
+    dirty = lab.copy()
+    island = np.linalg.norm(pts - np.array([0.0, 0.0, 1.0]), axis=1) < 0.1  # inside the +z face
+    top = np.bincount(lab[island]).argmax()
+    dirty[island] = (top + 1) % 6
+    clean = clean_labels(pts, dirty)
+    assert len(np.unique(clean)) == 6
+    # The island went back to the face around it; elsewhere only stray border points moved.
+    top_clean = np.bincount(clean[~island][lab[~island] == top]).argmax()
+    assert (clean[island] == top_clean).all()
+    remap = np.array([np.bincount(clean[lab == k]).argmax() for k in range(6)])
+    assert np.mean(remap[lab[~island]] != clean[~island]) < 2e-3
+
+
+def test_crease_edges_of_a_subdivided_box_lie_on_its_12_edges() -> None:
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box((1.0, 2.0, 3.0)).subdivide().subdivide()
+    edges = crease_edges(np.asarray(box.vertices), np.asarray(box.faces), 30.0)
+    mid = np.asarray(box.vertices)[edges].mean(axis=1)
+    half = np.array([0.5, 1.0, 1.5])
+    on_faces = (np.isclose(np.abs(mid), half, atol=1e-9)).sum(axis=1)
+    assert len(edges) > 0 and (on_faces == 2).all()
+    # Total crease length = the box's edge length sum 4 (1 + 2 + 3).
+    length = np.linalg.norm(np.diff(np.asarray(box.vertices)[edges], axis=1), axis=2).sum()
+    assert length == pytest.approx(24.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("radius", [0.5, 2.0, 30.0])
+def test_curvature_radius_of_a_sphere(radius: float) -> None:
+    trimesh = pytest.importorskip("trimesh")
+    s = trimesh.creation.icosphere(4, radius=radius)
+    assert curvature_radius(np.asarray(s.vertices), np.asarray(s.faces)) == pytest.approx(
+        radius, rel=0.15)
+
+
+def test_layout_summary_of_the_cube() -> None:
+    faces = quads_of(CUBE_T)
+    s = layout_summary(faces, np.arange(6), n_creases=12)
+    assert s["patches"] == 6 and s["faces"] == {"quads": 6, "triangles": 0}
+    assert s["corner_valence"] == {"3": 8} and s["components"] == 1 and s["creases"] == 12
