@@ -9,6 +9,7 @@ from pde2cad.layout.auto import (
     clean_labels,
     crease_edges,
     curvature_radius,
+    dissolve_doublets,
     label_points,
     layout_summary,
     quads_of,
@@ -32,6 +33,29 @@ def test_quads_of_pairs_triangles_into_the_cube_faces() -> None:
     for f in faces:
         sides = [np.linalg.norm(CUBE_V[f[i]] - CUBE_V[f[(i + 1) % 4]]) for i in range(4)]
         assert np.allclose(sides, 2.0)
+
+
+def _cycle_edges(face: tuple[int, ...]) -> set[frozenset[int]]:
+    return {frozenset((face[i], face[(i + 1) % len(face)])) for i in range(len(face))}
+
+
+def test_dissolve_doublets_restores_the_cube_face() -> None:
+    """Cube face (0, 1, 3, 2) split through a valence-2 vertex 8 on its diagonal 0-3."""
+    split = [(0, 1, 3, 8), (3, 2, 0, 8)] + CUBE_Q[1:]
+    faces = dissolve_doublets(split)
+    assert len(faces) == 6
+    assert sorted(tuple(sorted(f)) for f in faces) == sorted(tuple(sorted(f)) for f in CUBE_Q)
+    # The merged face is a cycle along the cube's edges, not through the removed vertex.
+    merged = [f for f in faces if set(f) == {0, 1, 2, 3}][0]
+    assert _cycle_edges(merged) == _cycle_edges(CUBE_Q[0])
+
+
+def test_dissolve_doublets_keeps_an_open_sheet() -> None:
+    """Two quads sharing one edge: their outer vertices have valence 1 or 2 but lie on the
+    open boundary, so nothing merges."""
+    sheet = [(0, 1, 4, 3), (1, 2, 5, 4)]
+    assert dissolve_doublets(sheet) == sheet
+    assert dissolve_doublets(CUBE_Q) == CUBE_Q
 
 
 def test_label_points_on_a_sphere_match_the_cube_faces() -> None:

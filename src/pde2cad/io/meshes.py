@@ -35,6 +35,7 @@ from pde2cad.layout.auto import (
     clean_labels,
     crease_edges,
     curvature_radius,
+    dissolve_doublets,
     label_points,
     layout_summary,
     quads_of,
@@ -227,7 +228,7 @@ def quad_remesh(
         out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
                                    crease_angle=float(crease_angle), pure_quad=True)
         if len(out_f):
-            return np.asarray(out_v, dtype=np.float64), quads_of(out_f)
+            return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
         target = int(target * 1.5) + 1
     raise InputError(
         "the quad remesher found no layout for this surface; pass labels (--labels) or try "

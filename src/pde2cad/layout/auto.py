@@ -7,7 +7,8 @@ faces is a patch, its vertices of valence != 4 are the corners where 3 or 5 patc
 This module turns it into labels, with numpy/scipy only:
 
 1. :func:`quads_of` pairs the remesher's triangles back into quads (it returns each quad as
-   two consecutive triangles) and checks that the faces form a manifold.
+   two consecutive triangles) and checks that the faces form a manifold;
+   :func:`dissolve_doublets` merges the two faces around each valence-2 vertex.
 2. :func:`label_points`: every point takes the face nearest to it (faces densely sampled,
    one KD-tree query per point).
 3. :func:`clean_labels`: a face that the nearest-face rule splits into several pieces
@@ -104,6 +105,51 @@ def quads_of(triangles: ArrayLike) -> list[tuple[int, ...]]:
         faces.append(tuple(a.tolist()))
         i += 1
     return faces
+
+
+def dissolve_doublets(faces: list[tuple[int, ...]]) -> list[tuple[int, ...]]:
+    """Faces without doublets: an interior vertex of valence 2 is removed, its two faces merged.
+
+    Two faces sharing both edges at a vertex ``v`` (a *doublet*, which quad remeshers leave
+    now and then) make a layout the pipeline cannot fit: ``v`` is a border kink between two
+    segments, so it is no corner, and each face becomes a 3-sided patch whose side bends by
+    ~180 deg there; their Coons bases fold (measured: every folded patch of a (2, 1, 1)
+    ellipsoid layout, seams at 180 deg). Merging ``(v, a, x, b)`` and ``(v, b, y, a)`` into
+    ``(a, x, b, y)`` is the usual doublet collapse.
+
+    1. Per vertex, the faces that hold it; a vertex in exactly two faces whose neighbours in
+       both are the same two vertices is a doublet (a boundary vertex of valence 2 is not).
+    2. Its faces are merged (each rotated to start at ``v``: ``A[1:] + B[2:-1]``); merging
+       can make a neighbour a doublet, so this repeats until none is left.
+    """
+    out = [tuple(f) for f in faces]
+    for _ in range(len(out)):
+        holders: dict[int, list[int]] = {}
+        for i, cyc in enumerate(out):
+            for v in cyc:
+                holders.setdefault(v, []).append(i)
+        merged = None
+        for v, owners in holders.items():
+            if len(owners) != 2:
+                continue
+            a, b = (_rotated(out[i], v) for i in owners)
+            if {a[1], a[-1]} != {b[1], b[-1]}:
+                continue
+            face = a[1:] + b[2:-1]
+            if len(set(face)) == len(face) >= 3:
+                merged = (owners, face)
+                break
+        if merged is None:
+            break
+        (i, j), face = merged
+        out = [f for k, f in enumerate(out) if k not in (i, j)] + [face]
+    return out
+
+
+def _rotated(cycle: tuple[int, ...], v: int) -> tuple[int, ...]:
+    """``cycle`` rotated to start at vertex ``v``."""
+    k = cycle.index(v)
+    return cycle[k:] + cycle[:k]
 
 
 def _fan(faces: list[tuple[int, ...]]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
