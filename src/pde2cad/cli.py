@@ -220,10 +220,19 @@ def _run_vectorize_batch(args: argparse.Namespace) -> int:
     stems = [Path(i).stem for i in args.images]
     if len(set(stems)) < len(stems):
         raise InputError("two images share a file name; their outputs would overwrite each other")
-    approximate = args.dxf_curves != "spline" and "dxf" in formats
+    from pde2cad.io.staging import check_paths
+
+    targets = {img: [out_dir / f"{Path(img).stem}.{f}" for f in dict.fromkeys(formats)]
+               for img in args.images}
+    # An image named x.svg in the output folder would be overwritten by its own SVG.
+    check_paths(args.images, [out for outs in targets.values() for out in outs])
+    # The same DXF settings as one image: R12 and kerf offsets are lines and arcs, fitted
+    # to 90 % so the written file stays within the tolerance.
+    approximate = "dxf" in formats and (
+        args.dxf_curves != "spline" or args.dxf_version == "R12" or bool(args.offset))
     options = vectorize_options(args, args.tolerance * (0.9 if approximate else 1.0))
-    jobs = [(img, [out_dir / f"{Path(img).stem}.{f}" for f in dict.fromkeys(formats)], options, args.dxf_curves)
-            for img in args.images]
+    dxf = {"curves": args.dxf_curves, "version": args.dxf_version, "offset": args.offset}
+    jobs = [(img, outs, options, dxf) for img, outs in targets.items()]
     workers = min(args.jobs if args.jobs > 0 else (os.cpu_count() or 1), len(jobs))
     if workers > 1:
         import multiprocessing as mp
@@ -254,18 +263,20 @@ def _batch_lines(results) -> tuple[int, int, int]:
     return code, curves, failed
 
 
-def _batch_one(job: tuple[str, list[Path], dict[str, Any], str]) -> dict[str, Any]:
+def _batch_one(job: tuple[str, list[Path], dict[str, Any], dict[str, Any]]) -> dict[str, Any]:
     """Vectorize and write one image of a batch; errors come back as a result, not raised."""
     from pde2cad.image.vectorize import vectorize
+    from pde2cad.io.dxf import write_dxf
 
-    image, outputs, options, dxf_curves = job
+    image, outputs, options, dxf = job
     try:
         drawing = vectorize(image, **options)
         for out in outputs:
             if out.suffix == ".svg":
                 drawing.write_svg(out)
             else:
-                drawing.write_dxf(out, curves=dxf_curves)
+                for note in write_dxf(drawing, out, **dxf):
+                    print(f"pde2cad vectorize: warning: {out}: {note}", file=sys.stderr)
     except InputError as exc:
         return {"image": image, "error": str(exc), "code": EXIT_INPUT}
     except ExportError as exc:

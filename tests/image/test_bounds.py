@@ -74,3 +74,39 @@ def test_batch_writes_every_image_and_one_line_each(tmp_path, capsys):
 
 def test_batch_needs_an_out_dir(tmp_path):
     assert main(["vectorize", "a.png", "b.png"]) == 2
+
+
+def test_batch_refuses_to_overwrite_an_input(tmp_path):
+    """An image named x.svg in the output folder would be replaced by its own SVG: refused
+    before any work, the image untouched."""
+    img = tmp_path / "disc.svg"  # a PNG under an .svg name
+    Image.fromarray(np.where(_disc(r=20.0), 0, 255).astype(np.uint8)).save(img, format="PNG")
+    other = tmp_path / "other.png"
+    Image.fromarray(np.where(_disc(r=25.0), 0, 255).astype(np.uint8)).save(other)
+    before = img.read_bytes()
+    assert main(["vectorize", str(img), str(other), "--out-dir", str(tmp_path)]) == 2
+    assert img.read_bytes() == before and not (tmp_path / "other.svg").exists()
+
+
+def test_batch_writes_the_dxf_version_and_kerf_asked_for(tmp_path):
+    """--dxf-version and --offset reach every image of a batch, as for one image: R12
+    polylines of lines and arcs, the disc grown by the offset."""
+    import ezdxf
+
+    paths = []
+    for i, r in enumerate((30.0, 40.0)):
+        p = tmp_path / f"disc{i}.png"
+        Image.fromarray(np.where(_disc(r=r), 0, 255).astype(np.uint8)).save(p)
+        paths.append(str(p))
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["vectorize", *paths, "--out-dir", str(out), "--format", "dxf",
+                 "--dxf-version", "R12", "--offset", "2", "--jobs", "1"]) == 0
+    for i, r in enumerate((30.0, 40.0)):
+        doc = ezdxf.readfile(out / f"disc{i}.dxf")
+        assert doc.dxfversion == "AC1009"
+        msp = doc.modelspace()
+        assert not msp.query("SPLINE") and len(msp.query("POLYLINE")) == 1
+        pts = np.array([(v.dxf.location.x, v.dxf.location.y) for v in msp.query("POLYLINE")[0].vertices])
+        radius = np.linalg.norm(pts - pts.mean(axis=0), axis=1)
+        assert abs(radius.mean() - (r + 2.0)) < 1.0  # grown by the kerf (1 px tolerance)
