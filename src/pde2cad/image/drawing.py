@@ -152,11 +152,14 @@ class Drawing:
 
         write_svg(self, path)
 
-    def write_dxf(self, path: str | Path, curves: str = "spline") -> None:
-        """Write a DXF R2010 file; ``curves`` is "spline", "polyline" or "arcs"."""
+    def write_dxf(self, path: str | Path, curves: str = "spline", *, version: str = "R2010",
+                  offset: float = 0.0) -> list[str]:
+        """Write a DXF file; ``curves`` is "spline", "polyline" or "arcs", ``version`` "R12",
+        "R2000" or "R2010", ``offset`` a kerf distance (see :func:`pde2cad.io.dxf.write_dxf`).
+        Returns the writer's notes (loops an offset closed)."""
         from pde2cad.io.dxf import write_dxf
 
-        write_dxf(self, path, curves=curves)
+        return write_dxf(self, path, curves=curves, version=version, offset=offset)
 
     def to_build123d(self) -> list[Any]:
         """One build123d ``Face`` per shape (outer loop with its holes) in the XY plane, in mm
