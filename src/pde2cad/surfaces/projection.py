@@ -208,13 +208,18 @@ class _StartTable:
         cls, tree: cKDTree, samples: NDArray[np.float64], pts: NDArray[np.float64]
     ) -> _StartTable | None:
         """The table for ``pts`` (N, D), or None when it would need over _MAX_VOXELS voxels
-        (points spread far beyond the surface) or more than a quarter as many voxels as
-        points (then the KD-tree query is cheaper)."""
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        or more than a quarter as many voxels as points (then the KD-tree query is cheaper).
+
+        The table covers the samples' bounding box and a margin of a tenth of their spread
+        (no pass over the points): a point beyond it starts from a border voxel's sample,
+        which is no worse a start than a coarse grid's nearest sample for such a point.
+        """
         spread = float(np.linalg.norm(np.ptp(samples, axis=0)))
         size = 0.5 * spread / np.sqrt(len(samples))
         if not size > 0:
             return None
+        lo = samples.min(axis=0) - 0.1 * spread
+        hi = samples.max(axis=0) + 0.1 * spread
         dims = np.floor((hi - lo) / size).astype(np.int64) + 1
         if float(np.prod(dims.astype(float))) > min(_MAX_VOXELS, 0.25 * len(pts)):
             return None

@@ -77,6 +77,8 @@ SAMPLE_POINTS = 30_000
 #: Width of the refinement bins along the coarse loop, in full-resolution nearest-neighbour
 #: distances (see :func:`refine_loop`).
 REFINE_BIN = 2.0
+# Bins between a winner and the other normals its exposure test tries (see refine_loop).
+_TILT = 3
 #: Unused since the band is exact (it was the coarse-loop sample size); kept so code that
 #: sets it keeps working.
 COARSE_POINTS = 50_000
@@ -202,11 +204,12 @@ def default_alpha(points2d: NDArray[np.float64]) -> float:
     return ALPHA_FACTOR * _spacing(points2d, 20_000)
 
 
-def _spacing(points2d: NDArray[np.float64], queries: int) -> float:
+def _spacing(points2d: NDArray[np.float64], queries: int, tree: cKDTree | None = None) -> float:
     """Median distance to the nearest distinct neighbour (duplicates skipped) over at most
-    ``queries`` strided query points, against all points."""
-    # An unbalanced tree builds ~2x faster; nearest distances are the same.
-    tree = cKDTree(points2d, balanced_tree=False, compact_nodes=False)
+    ``queries`` strided query points, against all points (``tree``: theirs, if built)."""
+    if tree is None:
+        # An unbalanced tree builds ~2x faster; nearest distances are the same.
+        tree = cKDTree(points2d, balanced_tree=False, compact_nodes=False)
     dist, _ = tree.query(points2d[:: max(1, len(points2d) // queries)], k=4)
     # First positive neighbour distance of each query point: duplicates give zeros.
     positive = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1)
@@ -487,16 +490,17 @@ def _near_cells(
 ) -> NDArray[np.int64]:
     """Rows of the points in grid cells (side ``cell``) within ``reach`` cells of a cell that
     ``path`` (m, 2), sampled at most half a cell apart, passes through: one binning of the
-    points, no distance search."""
-    lo = points2d.min(axis=0)
-    dims = np.floor((points2d.max(axis=0) - lo) / cell).astype(np.int64) + 1
+    points, no distance search. The grid spans the path's box and reach + 1 cells more; a
+    point beyond it is clipped onto its unmarked border."""
+    lo = path.min(axis=0) - (reach + 1) * cell
+    dims = np.floor((path.max(axis=0) + (reach + 1) * cell - lo) / cell).astype(np.int64) + 1
     marked = np.zeros(tuple(dims), dtype=bool)
     ij = np.clip(np.floor((path - lo) / cell).astype(np.int64), 0, dims - 1)
     marked[ij[:, 0], ij[:, 1]] = True
     marked = maximum_filter(marked, size=2 * reach + 1, mode="constant", cval=False)
     scaled = (points2d - lo) * (1.0 / cell)
-    i = np.minimum(scaled[:, 0].astype(np.int64), dims[0] - 1)
-    j = np.minimum(scaled[:, 1].astype(np.int64), dims[1] - 1)
+    i = np.clip(scaled[:, 0], 0, dims[0] - 1).astype(np.int64)
+    j = np.clip(scaled[:, 1], 0, dims[1] - 1).astype(np.int64)
     return np.flatnonzero(marked.reshape(-1)[i * dims[1] + j])
 
 
@@ -534,7 +538,8 @@ def refine_loop(
     path, _ = _resample(ring, max(len(ring), int(np.ceil(_perimeter(ring) / (0.25 * alpha)))))
     rows = _near_cells(points2d, path, 0.5 * alpha, 2)
     cand = points2d[rows]
-    centres, arc, scale = _bins(ring, REFINE_BIN * _spacing(cand, 5_000))
+    tree = cKDTree(cand, balanced_tree=False, compact_nodes=False)
+    centres, arc, scale = _bins(ring, REFINE_BIN * _spacing(cand, 5_000, tree))
     # Tangents over +-2 bins: smooth across the coarse loop's vertices.
     tangent = np.roll(centres, -2, axis=0) - np.roll(centres, 2, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-300)[:, None]
@@ -548,7 +553,10 @@ def refine_loop(
     perimeter = _perimeter(ring)
     along = (arc[near[win]] + np.einsum("ij,ij->i", rel[win], tangent[near[win]])) % perimeter
     radius = (ALPHA_FACTOR / REFINE_BIN) * scale[near[win]]
-    keep = _exposed(along, offset[win], perimeter, radius)
+    # Discs rest on a winner from its bin's outward normal and from those a few bins to
+    # either side (so a corner's tip and the sides next to it stay).
+    bins = near[win][:, None] + np.array([0, -_TILT, _TILT])
+    keep = _exposed(tree, cand[win], outward[bins % len(centres)], radius)
     win, along = win[keep], along[keep]
     # In arc order: the winners of neighbouring bins may lie the other way round.
     return rows[win[np.argsort(along, kind="stable")]]
@@ -581,25 +589,18 @@ def _perimeter(ring: NDArray[np.float64]) -> float:
 
 
 def _exposed(
-    along: NDArray[np.float64],
-    offset: NDArray[np.float64],
-    perimeter: float,
+    tree: cKDTree,
+    ring: NDArray[np.float64],
+    normals: NDArray[np.float64],
     radius: NDArray[np.float64],
 ) -> NDArray[np.bool_]:
-    """Which loop points, at arc positions ``along`` (n,) and outward ``offset`` (n,), the
-    disc of ``radius`` (n,) resting on each from straight outside keeps free of the others
-    (the nearest few on either side, all a disc can reach)."""
-    n = len(along)
-    keep = np.ones(n, dtype=bool)
-    reach = min(n // 2, int(np.ceil(radius.max() * n / perimeter)) + 2)
-    index = np.arange(n)
-    for shift in range(1, reach + 1):  # a few shifts; each is vectorized over the loop
-        for sign in (1, -1):
-            j = np.roll(index, -sign * shift)
-            gap = np.abs((along[j] - along + 0.5 * perimeter) % perimeter - 0.5 * perimeter)
-            sag = radius - np.sqrt(np.maximum(radius * radius - gap * gap, 0.0))
-            keep &= ~((gap < radius) & (offset[j] - offset > sag))
-    return keep
+    """Which points ``ring`` (n, 2) some disc of ``radius`` (n,) touching them from outside
+    along one of their ``normals`` (n, k, 2) keeps free of every point in ``tree``: the
+    alpha shape's test for a boundary vertex, over k directions instead of all."""
+    centres = ring[:, None, :] + radius[:, None, None] * normals  # (n, k, 2)
+    dist, _ = tree.query(centres.reshape(-1, 2))
+    free = dist.reshape(normals.shape[:2]) >= (1.0 - 1e-6) * radius[:, None]
+    return free.any(axis=1)
 
 
 # --------------------------------------------------------------------------- corners
