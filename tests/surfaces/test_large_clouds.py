@@ -23,6 +23,7 @@ from pde2cad.surfaces.projection import project_points
 from pde2cad.surfaces.region import boundary_loop, extract_boundary, sampled_loop
 
 Sheet = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
+Warp = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 
 
 def _wave(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -39,7 +40,7 @@ def _flag(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]
 
 
 #: name -> (sheet over [0, 1]^2, warp of the uniform x samples, noise, scale, shift)
-CASES: dict[str, tuple[Sheet, Callable[[NDArray[np.float64]], NDArray[np.float64]], float, float, float]] = {
+CASES: dict[str, tuple[Sheet, Warp, float, float, float]] = {
     "wave": (_wave, lambda x: x, 0.0, 1.0, 0.0),
     "cap": (_cap, lambda x: x, 0.0, 1.0, 0.0),
     "noisy flag": (_flag, lambda x: x, 1e-3, 1.0, 0.0),

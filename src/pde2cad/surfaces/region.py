@@ -539,7 +539,8 @@ def refine_loop(
     rows = _near_cells(points2d, path, 0.5 * alpha, 2)
     cand = points2d[rows]
     tree = cKDTree(cand, balanced_tree=False, compact_nodes=False)
-    centres, arc, scale = _bins(ring, REFINE_BIN * _spacing(cand, 5_000, tree))
+    width = REFINE_BIN * _spacing(cand, 5_000, tree)
+    centres, arc, scale = _bins(ring, width)
     # Tangents over +-2 bins: smooth across the coarse loop's vertices.
     tangent = np.roll(centres, -2, axis=0) - np.roll(centres, 2, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-300)[:, None]
@@ -552,7 +553,9 @@ def refine_loop(
     win = order[last]  # outermost candidate of every non-empty bin
     perimeter = _perimeter(ring)
     along = (arc[near[win]] + np.einsum("ij,ij->i", rel[win], tangent[near[win]])) % perimeter
-    radius = (ALPHA_FACTOR / REFINE_BIN) * scale[near[win]]
+    # Never a smaller disc than the alpha of the median spacing: the edge lengths that
+    # scale the bins are noisy, and a small disc finds empty room too easily.
+    radius = (ALPHA_FACTOR / REFINE_BIN) * np.maximum(scale[near[win]], width)
     # Discs rest on a winner from its bin's outward normal and from those a few bins to
     # either side (so a corner's tip and the sides next to it stay).
     bins = near[win][:, None] + np.array([0, -_TILT, _TILT])
