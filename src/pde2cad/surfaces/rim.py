@@ -32,8 +32,8 @@ into every patch that keeps the side fixed.
 5. The rim point: ``Q + e O + h(0, e) N`` at the station's reference point ``Q``, i.e. the
    surface extrapolated to the estimated rim.
 
-Stations whose window reaches within a window depth of the rim's ends are skipped (the other
-side of a corner would enter them); the ends are left to the corner estimate of the caller.
+Samples within a window depth of the rim's ends are left out (the other side of a corner
+would cut the windows' depth there); the ends are left to the corner estimate of the caller.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
+from pde2cad.curves.piecewise import denoise
 from pde2cad.surfaces.boundary import PiecewiseBezier
 
 #: Window length along the rim, in sample spacings: ~RIM_WINDOW x RIM_DEPTH points per window.
@@ -64,6 +65,8 @@ MIN_WINDOW_POINTS = 18
 SAMPLED_ROW = 3
 #: Points of the density estimate (a strided subsample of the cloud).
 _DENSITY_SAMPLE = 20_000
+#: Loop points a polyline reference is smoothed over (odd).
+REFERENCE_WINDOW = 31
 #: Offsets tried per station by the likelihood search (then refined by a parabola).
 _GRID = 65
 
@@ -114,9 +117,10 @@ def sample_spacing(points: NDArray[np.float64]) -> float:
 
 def locate_rim(
     points: NDArray[np.float64],
-    reference: PiecewiseBezier,
+    reference: PiecewiseBezier | NDArray[np.float64],
     spacing: float,
     tree: cKDTree | None = None,
+    least: int = 1,
 ) -> RimEstimate | None:
     """Rim points of an open side from the samples near it (see the module docstring).
 
@@ -125,13 +129,16 @@ def locate_rim(
     points : (N, 3) float
         The samples of the surface the side bounds (others may be included if they lie
         farther than a window depth from the side).
-    reference : PiecewiseBezier
-        The provisional side, e.g. fitted to the boundary loop: within about a window depth of
-        the true rim, and oriented either way.
+    reference : PiecewiseBezier or (m, 3) float
+        The provisional side, e.g. fitted to the boundary loop, or the ordered loop points
+        themselves: within about a window depth of the true rim, and oriented either way.
     spacing : float
         Sample spacing (:func:`sample_spacing`).
     tree : cKDTree, optional
         KD-tree of ``points`` (built when omitted).
+    least : int
+        Fewest stations: a short side gets them closer than ``RIM_STEP`` spacings (windows
+        overlapping more), so an edge fit has enough data.
 
     Returns
     -------
@@ -144,19 +151,26 @@ def locate_rim(
     depth = RIM_DEPTH * spacing
     half = 0.5 * RIM_WINDOW * spacing
     # First pass at the nominal depth; a second one if the noise needs a deeper window.
-    est = _stations(points, tree, ref, tangent, arc, half, depth, spacing)
+    est = _stations(points, tree, ref, tangent, arc, half, depth, spacing, least)
     if est is not None and NOISE_DEPTH * float(np.median(est.noise)) > depth:
         depth = NOISE_DEPTH * float(np.median(est.noise))
         est = _stations(points, tree, ref, tangent, arc, half * depth / (RIM_DEPTH * spacing),
-                        depth, spacing)
+                        depth, spacing, least)
     return est
 
 
 def _reference(
-    curve: PiecewiseBezier, step: float
+    curve: PiecewiseBezier | NDArray[np.float64], step: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Samples of ``curve`` about ``step`` apart by arc length, unit tangents and arc."""
-    fine = curve.evaluate(np.linspace(0.0, 1.0, 2049))
+    """Samples of ``curve`` about ``step`` apart by arc length, unit tangents and arc.
+
+    A polyline (m, 3) (e.g. a run of an alpha-shape loop) is smoothed first
+    (Savitzky-Golay over REFERENCE_WINDOW points), so its zigzag does not turn the tangents.
+    """
+    if isinstance(curve, PiecewiseBezier):
+        fine = curve.evaluate(np.linspace(0.0, 1.0, 2049))
+    else:
+        fine, _ = denoise(np.asarray(curve, dtype=float), closed=False, pos_window=REFERENCE_WINDOW)
     seg = np.linalg.norm(np.diff(fine, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
     count = max(int(np.ceil(arc[-1] / step)), 2) + 1
@@ -176,14 +190,20 @@ def _stations(
     half: float,
     depth: float,
     spacing: float,
+    least: int,
 ) -> RimEstimate | None:
     """Steps 2-5 of the module docstring for windows ``2 half`` long and ``depth`` deep."""
     length = float(arc[-1])
-    margin = half + depth
-    count = int(np.floor((length - 2.0 * margin) / (RIM_STEP * spacing))) + 1
-    if count < 1:
+    # The offsets of samples within a window depth of an end are left out: past a corner of
+    # at least 45 degrees they all lie inside the window depth of this side only. The
+    # windows nearest the ends are cut short there, which leaves the offsets' distribution
+    # as it is; their quadrics (heights) still use all samples of the window.
+    margin = depth
+    usable = length - 2.0 * margin
+    if usable <= 0:
         return None
-    station_arc = margin + np.arange(count) * ((length - 2.0 * margin) / max(count - 1, 1))
+    count = max(int(np.floor(usable / (RIM_STEP * spacing))) + 1, least)
+    station_arc = margin + np.arange(count) * (usable / max(count - 1, 1))
     if count == 1:
         station_arc = np.array([0.5 * length])
     # Samples near the reference: each with its nearest reference sample and arc position.
@@ -194,6 +214,7 @@ def _stations(
     p = points[near]
     _, k = cKDTree(ref).query(p)
     a = arc[k] + np.einsum("ij,ij->i", p - ref[k], tangent[k])
+    inner = (a >= margin) & (a <= length - margin)
     # (station, point) pairs: every point in the windows covering its arc position.
     first = np.searchsorted(station_arc, a - half)
     last = np.searchsorted(station_arc, a + half)
@@ -214,8 +235,8 @@ def _stations(
     o_pt /= np.linalg.norm(o_pt, axis=1, keepdims=True)
     d = np.einsum("ij,ij->i", p[pt] - ref[k[pt]], o_pt)
     keep = d > -depth
-    st, rel, d = st[keep], rel[keep], d[keep]
-    n = np.bincount(st, minlength=count)
+    st, rel, d, use = st[keep], rel[keep], d[keep], inner[pt[keep]]
+    n = np.bincount(st[use], minlength=count)
     ok = n >= MIN_WINDOW_POINTS
     if not ok.any():
         return None
@@ -223,7 +244,7 @@ def _stations(
     y = np.einsum("ij,ij->i", rel, outward[st]) / half
     h = np.einsum("ij,ij->i", rel, normal[st])
     coef, sigma = _quadrics(x, y, h, st, count)
-    e, sampled = _rim_offsets(d, st, count, sigma, -depth)
+    e, sampled = _rim_offsets(d[use], st[use], count, sigma, -depth)
     yy = e / half
     height = coef[:, 0] + coef[:, 2] * yy + coef[:, 5] * yy * yy
     rim = q + e[:, None] * outward + height[:, None] * normal
