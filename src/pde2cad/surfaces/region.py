@@ -921,9 +921,9 @@ def _off_chord(
 
 
 def _explained(distance: NDArray[np.float64], tolerance: float) -> bool:
-    """Whether a line or plane explains rim points to within their noise: RMS distance
-    at most ``tolerance / 2`` (the tolerance is NOISE_FACTOR = 3 noise RMS, so 1.5 noise
-    RMS), and none beyond ``2 tolerance`` (6 sigma: a real bend, not noise)."""
+    """Whether a line or plane explains rim points to within their noise: RMS distance at
+    most ``tolerance / 2`` (the tolerance is about 4 noise sigmas, see _rim_tolerance), and
+    none beyond ``2 tolerance`` (a real bend, not noise)."""
     rms = float(np.sqrt(np.mean(distance * distance)))
     return rms <= 0.5 * tolerance and float(distance.max()) <= 2.0 * tolerance
 
@@ -957,6 +957,40 @@ def _rim_side(
     return (planar, moved) if moved <= tolerance else (side, error)
 
 
+def _straight_line(
+    run: NDArray[np.float64], tolerance: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """``(point, unit direction)`` of the line the rim points lie on to within their noise
+    (:func:`_explained`), or None."""
+    centre = run.mean(axis=0)
+    direction = np.linalg.eigh((run - centre).T @ (run - centre))[1][:, -1]
+    rel = run - centre
+    off = np.linalg.norm(rel - np.outer(rel @ direction, direction), axis=1)
+    return (centre, direction) if _explained(off, tolerance) else None
+
+
+def _onto_straight_rims(
+    corners: NDArray[np.float64],
+    lines: list[tuple[NDArray[np.float64], NDArray[np.float64]] | None],
+) -> NDArray[np.float64]:
+    """Corners between two straight rims where their lines meet (all the stations of both
+    sides fix it, not only those near the corner); a corner with one straight rim onto its
+    line. ``lines[k]`` is side k's line (from corner k to k + 1) or None."""
+    out = corners.copy()
+    for j in range(len(corners)):  # 3-4 corners
+        before, after = lines[j - 1], lines[j]
+        meet = None if before is None or after is None else _lines_meet(before, after, 20.0)
+        if meet is not None:
+            out[j] = meet
+            continue
+        for line in (before, after):
+            if line is not None:
+                point, direction = line
+                out[j] = point + ((corners[j] - point) @ direction) * direction
+                break
+    return out
+
+
 def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float) -> bool:
     """Whether the loop points of a side are samples on its rim (a row of structured data).
 
@@ -987,7 +1021,8 @@ def _relocate_rims(
        short for a station keeps its loop points.
     2. Corners (unless ``fixed``, the caller's coordinates) where the rims of their two sides
        meet (:func:`_rim_corner`), at the height of the surface there (:func:`onto_surface`).
-    3. Tolerance (unless given): the noise of the rim points (:func:`_noise_tolerance`).
+    3. Tolerance (unless given): the noise of the rim points (:func:`_rim_tolerance`);
+       corners (unless fixed) on the lines of straight rims (:func:`_onto_straight_rims`).
     4. Sides refitted through the rim points: lines where straight, plane curves where
        planar (:func:`_rim_side`). A side whose rim is a sampled row (structured data) and
        whose corners stay keeps its loop fit.
@@ -1021,6 +1056,10 @@ def _relocate_rims(
                     corners[j] = onto_surface(pts, tree, corner, spacing)
     inner = [run[1:-1] if r is None else r.points for run, r in zip(runs, rims)]
     tol = _rim_tolerance(inner, diagonal) if tolerance is None else tolerance
+    if not fixed:
+        corners = _onto_straight_rims(corners, [
+            None if r is None else _straight_line(r.points, tol) for r in rims
+        ])
     full = [np.vstack([corners[k], inner[k], corners[(k + 1) % c]]) for k in range(c)]
     out, errors = [], np.empty(c)
     for k in range(c):  # 3-4 sides
