@@ -257,7 +257,8 @@ def _rim_data(own: NDArray[np.float64], run: NDArray[np.float64]) -> NDArray[np.
     loop run (:func:`~pde2cad.surfaces.rim.locate_rim`), not the run itself, whose points
     lie about half a spacing inside the true rim and zigzag; None (keep the run) where the
     edge is too short for a window depth at both ends or its windows hold too few samples."""
-    est = locate_rim(own, run, sample_spacing(own), least=RIM_STATIONS)
+    tree = cKDTree(own)
+    est = locate_rim(own, run, sample_spacing(own, tree), tree, least=RIM_STATIONS)
     if est is None or len(est.points) < RIM_STATIONS // 2:
         return None
     return est.points

@@ -92,6 +92,9 @@ REFINE_SPAN = 16
 #: smoothed copy of their side, at least TOLERANCE_FLOOR * bounding-box diagonal.
 NOISE_FACTOR = 3.0
 TOLERANCE_FLOOR = 1e-4
+#: Half-width of the band of points the rim estimate gets, in loop spacings (a loop edge
+#: spans ~1 sample spacing; the windows reach RIM_DEPTH = 4 spacings or 4 noise sigmas).
+RIM_BAND = 40.0
 #: Loop points within this RMS distance (in sample spacings) of their fitted side are a
 #: sampled rim (structured data), whose sides stay on them (see _sampled_rim).
 SAMPLED_LOOP = 0.05
@@ -957,6 +960,25 @@ def _rim_side(
     return (planar, moved) if moved <= tolerance else (side, error)
 
 
+def _rim_band(
+    uv: NDArray[np.float64], loop_uv: NDArray[np.float64], runs: list[NDArray[np.float64]]
+) -> NDArray[np.bool_]:
+    """Which points lie within about RIM_BAND loop spacings of the loop (in the projection
+    plane, on a grid of cells half that wide): all the rim estimate reads (its windows reach
+    a few sample spacings, or noise sigmas, into the surface), so a dense cloud's interior
+    never goes into a KD-tree."""
+    step = float(np.median(np.concatenate([np.linalg.norm(np.diff(r, axis=0), axis=1) for r in runs])))
+    cell = 0.5 * RIM_BAND * step
+    lo = uv.min(axis=0)
+    ij = np.floor((uv - lo) / cell).astype(np.int64)
+    dims = ij.max(axis=0) + 1
+    mark = np.zeros(tuple(dims), dtype=bool)
+    at = np.clip(np.floor((loop_uv - lo) / cell).astype(np.int64), 0, dims - 1)
+    mark[at[:, 0], at[:, 1]] = True
+    mark = maximum_filter(mark, size=3, mode="constant", cval=False)
+    return mark[ij[:, 0], ij[:, 1]]
+
+
 def _straight_line(
     run: NDArray[np.float64], tolerance: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
@@ -1007,6 +1029,7 @@ def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float
 
 def _relocate_rims(
     pts: NDArray[np.float64],
+    band: NDArray[np.bool_],
     runs: list[NDArray[np.float64]],
     sides: list[PiecewiseBezier],
     loop_errors: NDArray[np.float64],
@@ -1015,7 +1038,8 @@ def _relocate_rims(
     tolerance: float | None,
     diagonal: float,
 ) -> tuple[list[PiecewiseBezier], NDArray[np.float64], float] | None:
-    """Sides on the true rim (:mod:`pde2cad.surfaces.rim`) instead of the boundary loop.
+    """Sides on the true rim (:mod:`pde2cad.surfaces.rim`) instead of the boundary loop,
+    from the points ``pts[band]`` near it (:func:`_rim_band`).
 
     1. Rim points along every side from the samples near it (:func:`locate_rim`); a side too
        short for a station keeps its loop points.
@@ -1030,8 +1054,9 @@ def _relocate_rims(
     Returns the sides, their fit errors and the tolerance; None when no side has a rim to
     move (all too short, or sampled rows).
     """
-    spacing = sample_spacing(pts)
+    pts = pts[band]
     tree = cKDTree(pts)
+    spacing = sample_spacing(pts, tree)
     c = len(sides)
     # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
     rims = [
@@ -1170,7 +1195,10 @@ def extract_boundary(
         sides.append(side)
     if rims:
         given = None if tolerance is None else float(tolerance)
-        moved = _relocate_rims(pts, runs, sides, errors, cpos, corners is not None, given, diagonal)
+        band = _rim_band(uv, uv[loop_index], runs)
+        moved = _relocate_rims(
+            pts, band, runs, sides, errors, cpos, corners is not None, given, diagonal
+        )
         if moved is not None:
             sides, errors, tol = moved
     return RegionBoundary(
