@@ -30,6 +30,7 @@ from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons, Ribbons
 from pde2cad.surfaces.patch import Patch, fit_patch
 from pde2cad.surfaces.projection import project_points
+from pde2cad.surfaces.region import extract_boundary
 
 Surface = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
 EDGE = np.linspace(0.0, 1.0, 201)
@@ -456,8 +457,11 @@ def test_tolerance_chooses_the_fewest_terms() -> None:
     if patch.n > 1:  # N was lowered as far as the tolerance allows
         fewer = fit_patch(points, m=patch.m, n=patch.n - 1, boundary=patch.boundary)
         assert fewer.errors["max"] > 1e-2
+    # Sides on the boundary loop (not on the rim) leave the outermost samples beyond them.
+    flag = _points("flag")
+    loop_sides = extract_boundary(flag, corners=_corners(_flag), rims=False)
     with pytest.raises(FitError, match=r"not reached .* distance to the boundary"):
-        fit_patch(_points("flag"), tolerance=1e-3, corners=_corners(_flag), max_terms=4)
+        fit_patch(flag, tolerance=1e-3, boundary=loop_sides, max_terms=4)
 
 
 def test_three_sided_patch() -> None:

@@ -11,7 +11,8 @@ the curves the patches share:
    Each segment's edges must form one cycle through all its corners (its side loop).
 3. **Edge data.** A shared edge is fitted to the *midline* of the border band: the midpoint
    of each border point and its nearest border point of the other segment. An open edge is
-   fitted to its open-boundary run.
+   fitted to its rim, estimated from the segment's samples near its open-boundary run
+   (:mod:`pde2cad.surfaces.rim`: the run itself lies about half a spacing inside).
 4. **Free fits.** Each edge gets a clamped cubic B-spline with ``2**j`` uniform spans, the
    count chosen by the Bayesian information criterion (enough spans for the shape, not so
    many that it follows the sampling noise), with closest-point reparameterization.
@@ -44,9 +45,14 @@ from scipy.spatial import cKDTree
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import CLUSTER_FACTOR, Layout
 from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.rim import locate_rim, sample_spacing
 
 Key = tuple[int, int]
 
+#: Fewest rim stations along an open edge (closer than RIM_STEP spacings on short edges:
+#: the end tangent lines are quadratics through the stations near each end). With under
+#: half of them (windows too sparse) the edge keeps its loop run.
+RIM_STATIONS = 12
 #: Candidate span counts of an edge curve (powers of two keep the breaks dyadic).
 SPAN_CHOICES = (1, 2, 4, 8, 16)
 #: Most edge data points the span choice looks at (an even subsample of the rest).
@@ -244,6 +250,18 @@ def _open_runs(
         if len(idx) >= 3 and step[idx[:-1]].max() <= gap:
             runs.append((int(ids[k]), int(ids[(k + 1) % len(ids)]), boundary[idx]))
     return runs
+
+
+def _rim_data(own: NDArray[np.float64], run: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Data of an open edge: its rim estimated from the segment's samples ``own`` near the
+    loop run (:func:`~pde2cad.surfaces.rim.locate_rim`), not the run itself, whose points
+    lie about half a spacing inside the true rim and zigzag; None (keep the run) where the
+    edge is too short for a window depth at both ends or its windows hold too few samples."""
+    tree = cKDTree(own)
+    est = locate_rim(own, run, sample_spacing(own, tree), tree, least=RIM_STATIONS)
+    if est is None or len(est.points) < RIM_STATIONS // 2:
+        return None
+    return est.points
 
 
 def _cycle(label: int, corner_ids: list[int], edges: list[Key]) -> list[int]:
@@ -541,10 +559,14 @@ def build_edges(
     gap = CLUSTER_FACTOR * radius
     for label, ids in seg_corners.items():
         boundary = layout.open_boundary.get(label, np.zeros((0, 3)))
+        own = None
         for c0, c1, run in _open_runs(boundary, corners[ids], ids, gap):
             key = key_of(c0, c1)
             if key in users:
                 continue
+            own = pts[lab == label] if own is None else own
+            rim = _rim_data(own, run)
+            run = run if rim is None else rim
             data[key] = run if c0 < c1 else run[::-1]
             users[key] = [label]
             seg_edges[label].append(key)

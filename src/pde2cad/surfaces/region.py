@@ -43,6 +43,13 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.rim import (
+    RimEstimate,
+    locate_rim,
+    onto_surface,
+    sample_spacing,
+    surface_normal,
+)
 
 #: Fewest points a region may have (a boundary loop and four sides need a few each).
 MIN_POINTS = 10
@@ -95,6 +102,12 @@ REFINE_SPAN = 16
 #: smoothed copy of their side, at least TOLERANCE_FLOOR * bounding-box diagonal.
 NOISE_FACTOR = 3.0
 TOLERANCE_FLOOR = 1e-4
+#: Half-width of the band of points the rim estimate gets, in loop spacings (a loop edge
+#: spans ~1 sample spacing; the windows reach RIM_DEPTH = 4 spacings or 4 noise sigmas).
+RIM_BAND = 40.0
+#: Loop points within this RMS distance (in sample spacings) of their fitted side are a
+#: sampled rim (structured data), whose sides stay on them (see _sampled_rim).
+SAMPLED_LOOP = 0.05
 #: Newton rounds of the side fits: boundary points are smooth samples, more rounds help.
 SIDE_ROUNDS = 10
 
@@ -864,16 +877,10 @@ def refine_corners(
         before, after = (_tangent_at_zero(loop, dist, reach) for dist in (behind, ahead))
         if before is None or after is None:
             continue
-        (p, d), (q, e) = before, after
-        b = float(d @ e)
-        if abs(b) > np.cos(np.radians(min_angle)):
+        estimate = _lines_meet(before, after, min_angle)
+        if estimate is None:
             continue
-        # Closest points p + s d and q + t e of the two lines (unit d, e): the normal
-        # equations of min |w + s d - t e|^2 with w = p - q.
-        w = p - q
-        s = (b * float(e @ w) - float(d @ w)) / (1.0 - b * b)
-        t = float(e @ w) + b * s
-        estimate = 0.5 * (p + s * d + q + t * e)
+        (_, d), (_, e) = before, after
         shift = estimate - loop[c]
         move = float(np.linalg.norm(shift))
         # d and e point from the corner into the sides, so d + e points into the region: a
@@ -884,11 +891,31 @@ def refine_corners(
     return out
 
 
+def _lines_meet(
+    before: tuple[NDArray[np.float64], NDArray[np.float64]],
+    after: tuple[NDArray[np.float64], NDArray[np.float64]],
+    min_angle: float,
+) -> NDArray[np.float64] | None:
+    """Midpoint of the closest points of two lines ``(point, unit direction)`` (skew in 3D),
+    or None where they meet at under ``min_angle`` degrees."""
+    (p, d), (q, e) = before, after
+    b = float(d @ e)
+    if abs(b) > np.cos(np.radians(min_angle)):
+        return None
+    # Closest points p + s d and q + t e of the two lines (unit d, e): the normal
+    # equations of min |w + s d - t e|^2 with w = p - q.
+    w = p - q
+    s = (b * float(e @ w) - float(d @ w)) / (1.0 - b * b)
+    t = float(e @ w) + b * s
+    return 0.5 * (p + s * d + q + t * e)
+
+
 def _tangent_at_zero(
-    loop: NDArray[np.float64], dist: NDArray[np.float64], reach: float
+    loop: NDArray[np.float64], dist: NDArray[np.float64], reach: float, least_quadratic: int = 4
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Point and unit tangent at arc length 0 of the loop points with ``0 < dist <= reach``
-    (line fit, or quadratic if it halves the RMS residual); None with under 4 points."""
+    (line fit, or quadratic if it halves the RMS residual and there are ``least_quadratic``
+    points); None with under 4 points."""
     inside = (dist > 0) & (dist <= reach)
     if inside.sum() < 4:
         return None
@@ -900,7 +927,7 @@ def _tangent_at_zero(
         coef = np.linalg.lstsq(design, y, rcond=None)[0]
         fits.append((coef, float(np.sqrt(np.mean((design @ coef - y) ** 2)))))
     (line, line_rms), (quad, quad_rms) = fits
-    coef = quad if quad_rms < 0.5 * line_rms else line
+    coef = quad if quad_rms < 0.5 * line_rms and inside.sum() >= least_quadratic else line
     norm = float(np.linalg.norm(coef[1]))
     return None if norm == 0.0 else (coef[0], coef[1] / norm)
 
@@ -969,6 +996,21 @@ def _noise_tolerance(runs: list[NDArray[np.float64]], diagonal: float) -> float:
     return max(NOISE_FACTOR * rms, TOLERANCE_FLOOR * diagonal)
 
 
+def _rim_tolerance(runs: list[NDArray[np.float64]], diagonal: float) -> float:
+    """Side-fit tolerance for rim points: the largest residual their noise is expected to
+    leave, ``(sqrt(2 ln J) + 1) sigma`` for ``J`` points (the mean maximum of J Gaussian
+    residuals, plus one sigma), at least TOLERANCE_FLOOR x diagonal.
+
+    Rim points are averages of many samples, so their noise is small and nearly Gaussian;
+    a tolerance below their largest noise residual would split a smooth side into pieces
+    whose joints (curvature jumps) then show in the patch's interior. ``sigma`` is the RMS
+    distance to a smoothed copy (:func:`_noise_tolerance` / NOISE_FACTOR).
+    """
+    sigma = _noise_tolerance(runs, 0.0) / NOISE_FACTOR
+    count = max(sum(len(r) for r in runs), 2)
+    return max((np.sqrt(2.0 * np.log(count)) + 1.0) * sigma, TOLERANCE_FLOOR * diagonal)
+
+
 def fit_side(
     run: NDArray[np.float64], tolerance: float, start: NDArray[np.float64], end: NDArray[np.float64]
 ) -> tuple[PiecewiseBezier, float]:
@@ -991,6 +1033,244 @@ def fit_side(
     return PiecewiseBezier.from_chain(ctrl), float(chain.max_error)
 
 
+def _rim_corner(
+    before: RimEstimate,
+    after: RimEstimate,
+    old: NDArray[np.float64],
+    reach: float,
+    normal: NDArray[np.float64] | None,
+    least_move: float,
+) -> NDArray[np.float64]:
+    """Corner where the rims of two sides meet: their tangent lines (from the stations
+    within ``reach`` of the corner, at least 4 each) extrapolated to where they cross.
+
+    The stations are taken into the tangent plane through ``old`` (``normal``) first: the
+    height of a curved surface would otherwise bend the lines (and pick quadratics that
+    amplify the in-plane noise); the caller puts the corner back onto the surface. ``old`` is
+    kept where the lines meet at under 20 degrees or cross farther than ``reach / 2`` from
+    it, or closer than ``least_move`` (a sample at the tip, as on a grid: extrapolation would
+    only add its own error).
+    """
+    lines = []
+    for dist, est in ((before.length - before.arc, before), (after.arc, after)):
+        span = max(reach, float(np.sort(dist)[min(3, len(dist) - 1)]))
+        flat = est.points
+        if normal is not None:
+            flat = flat - np.outer((flat - old) @ normal, normal)
+        # Noisy stations halve a line's RMS with a quadratic by chance (F(1, n - 3) > 3
+        # (n - 3)): a third of the time for 4, ~1 % from 8, the least allowed here.
+        lines.append(_tangent_at_zero(flat, dist, span, least_quadratic=8))
+    if lines[0] is None or lines[1] is None:
+        return old
+    estimate = _lines_meet(lines[0], lines[1], 20.0)
+    if estimate is None or not least_move <= np.linalg.norm(estimate - old) <= 0.5 * reach:
+        return old
+    return estimate
+
+
+def _side_plane(
+    run: NDArray[np.float64], tolerance: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """``(point, unit normal)`` of the plane the run lies in to ``tolerance``, or None.
+
+    A straight run lies in many planes: None too (its side is made a line instead).
+    """
+    centre = run.mean(axis=0)
+    _, vec = np.linalg.eigh((run - centre).T @ (run - centre))
+    normal = vec[:, 0]
+    if not _explained(np.abs((run - centre) @ normal), tolerance):
+        return None
+    if _explained(_off_chord(run, run[0], run[-1]), tolerance):
+        return None
+    return centre, normal
+
+
+def _off_chord(
+    run: NDArray[np.float64], start: NDArray[np.float64], end: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Distances (n,) of ``run`` from the line through ``start`` and ``end``."""
+    chord = end - start
+    along = chord / max(float(np.linalg.norm(chord)), 1e-300)
+    rel = run - start
+    return np.linalg.norm(rel - np.outer(rel @ along, along), axis=1)
+
+
+def _explained(distance: NDArray[np.float64], tolerance: float) -> bool:
+    """Whether a line or plane explains rim points to within their noise: RMS distance at
+    most ``tolerance / 2`` (the tolerance is about 4 noise sigmas, see _rim_tolerance), and
+    none beyond ``2 tolerance`` (a real bend, not noise)."""
+    rms = float(np.sqrt(np.mean(distance * distance)))
+    return rms <= 0.5 * tolerance and float(distance.max()) <= 2.0 * tolerance
+
+
+def _rim_side(
+    run: NDArray[np.float64],
+    start: NDArray[np.float64],
+    end: NDArray[np.float64],
+    plane: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    tolerance: float,
+) -> tuple[PiecewiseBezier, float]:
+    """The side through rim points ``run`` (corners included): a line when the run is
+    straight to ``tolerance``, a plane curve when it is planar, else a free 3D chain."""
+    off = _off_chord(run, start, end)
+    if _explained(off, tolerance):
+        ctrl = start + np.outer(np.arange(4) / 3.0, end - start)
+        ctrl[0], ctrl[3] = start, end  # bit-identical corners for the neighbouring sides
+        return PiecewiseBezier.from_cubic(ctrl), float(off.max())
+    side, error = fit_side(run, tolerance, start, end)
+    if plane is None:
+        return side, error
+    # Control points onto the plane: a Bezier with planar control points is planar, and the
+    # projection is affine, so G1 joints stay G1. The corners are the caller's.
+    centre, normal = plane
+    ctrl = side.ctrl - np.multiply.outer((side.ctrl - centre) @ normal, normal)
+    ctrl[0, 0], ctrl[-1, 3] = start, end
+    planar = PiecewiseBezier(ctrl, side.breaks)
+    moved = float(cKDTree(planar.evaluate(np.linspace(0.0, 1.0, 4001))).query(run)[0].max())
+    # The plane was accepted on RMS: where it moves the curve beyond the tolerance somewhere,
+    # the free fit is kept.
+    return (planar, moved) if moved <= tolerance else (side, error)
+
+
+def _rim_band(
+    uv: NDArray[np.float64], loop_uv: NDArray[np.float64], runs: list[NDArray[np.float64]]
+) -> NDArray[np.bool_]:
+    """Which points lie within about RIM_BAND loop spacings of the loop (in the projection
+    plane, on a grid of cells half that wide): all the rim estimate reads (its windows reach
+    a few sample spacings, or noise sigmas, into the surface), so a dense cloud's interior
+    never goes into a KD-tree."""
+    step = float(np.median(np.concatenate([np.linalg.norm(np.diff(r, axis=0), axis=1) for r in runs])))
+    cell = 0.5 * RIM_BAND * step
+    lo = uv.min(axis=0)
+    ij = np.floor((uv - lo) / cell).astype(np.int64)
+    dims = ij.max(axis=0) + 1
+    mark = np.zeros(tuple(dims), dtype=bool)
+    at = np.clip(np.floor((loop_uv - lo) / cell).astype(np.int64), 0, dims - 1)
+    mark[at[:, 0], at[:, 1]] = True
+    mark = maximum_filter(mark, size=3, mode="constant", cval=False)
+    return mark[ij[:, 0], ij[:, 1]]
+
+
+def _straight_line(
+    run: NDArray[np.float64], tolerance: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """``(point, unit direction)`` of the line the rim points lie on to within their noise
+    (:func:`_explained`), or None."""
+    centre = run.mean(axis=0)
+    direction = np.linalg.eigh((run - centre).T @ (run - centre))[1][:, -1]
+    rel = run - centre
+    off = np.linalg.norm(rel - np.outer(rel @ direction, direction), axis=1)
+    return (centre, direction) if _explained(off, tolerance) else None
+
+
+def _onto_straight_rims(
+    corners: NDArray[np.float64],
+    lines: list[tuple[NDArray[np.float64], NDArray[np.float64]] | None],
+) -> NDArray[np.float64]:
+    """Corners between two straight rims where their lines meet (all the stations of both
+    sides fix it, not only those near the corner); a corner with one straight rim onto its
+    line. ``lines[k]`` is side k's line (from corner k to k + 1) or None."""
+    out = corners.copy()
+    for j in range(len(corners)):  # 3-4 corners
+        before, after = lines[j - 1], lines[j]
+        meet = None if before is None or after is None else _lines_meet(before, after, 20.0)
+        if meet is not None:
+            out[j] = meet
+            continue
+        for line in (before, after):
+            if line is not None:
+                point, direction = line
+                out[j] = point + ((corners[j] - point) @ direction) * direction
+                break
+    return out
+
+
+def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float) -> bool:
+    """Whether the loop points of a side are samples on its rim (a row of structured data).
+
+    The loop of random samples zigzags between outermost samples whose depths differ by
+    exponential gaps of about a spacing over a spacing's run, so it stays a sizeable fraction
+    of a spacing off any smooth curve; a sampled row lies on its fitted side to the fit's
+    tolerance. The RMS distance of the loop points to the side tells them apart at
+    SAMPLED_LOOP spacings.
+    """
+    curve = side.evaluate(np.linspace(0.0, 1.0, 4001))
+    dist = cKDTree(curve).query(run)[0]
+    return float(np.sqrt(np.mean(dist * dist))) <= SAMPLED_LOOP * spacing
+
+
+def _relocate_rims(
+    pts: NDArray[np.float64],
+    band: NDArray[np.bool_],
+    runs: list[NDArray[np.float64]],
+    sides: list[PiecewiseBezier],
+    loop_errors: NDArray[np.float64],
+    corners: NDArray[np.float64],
+    fixed: bool,
+    tolerance: float | None,
+    diagonal: float,
+) -> tuple[list[PiecewiseBezier], NDArray[np.float64], float] | None:
+    """Sides on the true rim (:mod:`pde2cad.surfaces.rim`) instead of the boundary loop,
+    from the points ``pts[band]`` near it (:func:`_rim_band`).
+
+    1. Rim points along every side from the samples near it (:func:`locate_rim`); a side too
+       short for a station keeps its loop points.
+    2. Corners (unless ``fixed``, the caller's coordinates) where the rims of their two sides
+       meet (:func:`_rim_corner`), at the height of the surface there (:func:`onto_surface`).
+    3. Tolerance (unless given): the noise of the rim points (:func:`_rim_tolerance`);
+       corners (unless fixed) on the lines of straight rims (:func:`_onto_straight_rims`).
+    4. Sides refitted through the rim points: lines where straight, plane curves where
+       planar (:func:`_rim_side`). A side whose rim is a sampled row (structured data) and
+       whose corners stay keeps its loop fit.
+
+    Returns the sides, their fit errors and the tolerance; None when no side has a rim to
+    move (all too short, or sampled rows).
+    """
+    pts = pts[band]
+    tree = cKDTree(pts)
+    spacing = sample_spacing(pts, tree)
+    c = len(sides)
+    # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
+    rims = [
+        None if _sampled_rim(run, side, spacing) else locate_rim(pts, side, spacing, tree)
+        for run, side in zip(runs, sides)
+    ]
+    rims = [None if r is None or r.sampled.mean() > 0.5 else r for r in rims]
+    if all(r is None for r in rims):
+        return None
+    old = corners
+    corners = corners.copy()
+    if not fixed:
+        perimeter = sum(r.length for r in rims if r is not None)
+        for j in range(c):  # 3-4 corners
+            before, after = rims[j - 1], rims[j]
+            if before is not None and after is not None:
+                normal = surface_normal(pts, tree, corners[j], spacing)
+                corner = _rim_corner(
+                    before, after, corners[j], perimeter / REFINE_SPAN, normal, 0.1 * spacing
+                )
+                if corner is not corners[j]:
+                    corners[j] = onto_surface(pts, tree, corner, spacing)
+    inner = [run[1:-1] if r is None else r.points for run, r in zip(runs, rims)]
+    tol = _rim_tolerance(inner, diagonal) if tolerance is None else tolerance
+    if not fixed:
+        corners = _onto_straight_rims(corners, [
+            None if r is None else _straight_line(r.points, tol) for r in rims
+        ])
+    full = [np.vstack([corners[k], inner[k], corners[(k + 1) % c]]) for k in range(c)]
+    out, errors = [], np.empty(c)
+    for k in range(c):  # 3-4 sides
+        ends = corners[k], corners[(k + 1) % c]
+        if rims[k] is None and all(np.array_equal(corners[i % c], old[i % c]) for i in (k, k + 1)):
+            out.append(sides[k])
+            errors[k] = loop_errors[k]
+            continue
+        side, errors[k] = _rim_side(full[k], *ends, _side_plane(full[k], tol), tol)
+        out.append(side)
+    # The tolerance the sides meet: a kept loop fit may have used a larger one.
+    return out, errors, max(tol, float(errors.max()))
+
+
 def extract_boundary(
     points: ArrayLike,
     *,
@@ -998,6 +1278,7 @@ def extract_boundary(
     count: int | None = None,
     alpha: float | None = None,
     tolerance: float | None = None,
+    rims: bool = True,
 ) -> RegionBoundary:
     """Boundary loop, corners and fitted sides of one region of a point cloud (Sec. 5.2.1-2).
 
@@ -1023,6 +1304,13 @@ def extract_boundary(
         Side-fit tolerance. Default: 3 x the RMS distance of the boundary points to a
         Savitzky-Golay smoothing of their side (the boundary's own noise, so sides follow the
         shape but not the jitter), at least 1e-4 x the bounding-box diagonal.
+    rims : bool
+        Place the sides on the true rim of the sampled surface, estimated from all samples
+        near each side (:mod:`pde2cad.surfaces.rim`), rather than on the boundary loop,
+        whose points lie about half a sample spacing inside and carry single-sample noise;
+        straight rims become lines and planar ones plane curves. Detected corners move to
+        where the rims meet; given corners stay as given. ``False``: sides fitted to the
+        loop points (the thesis's Section 5.2.2).
 
     Returns
     -------
@@ -1080,6 +1368,14 @@ def extract_boundary(
     for k, run in enumerate(runs):  # 3-4 sides, each fitted as a whole
         side, errors[k] = fit_side(run, tol, cpos[k], cpos[(k + 1) % c])
         sides.append(side)
+    if rims:
+        given = None if tolerance is None else float(tolerance)
+        band = _rim_band(uv, uv[loop_index], runs)
+        moved = _relocate_rims(
+            pts, band, runs, sides, errors, cpos, corners is not None, given, diagonal
+        )
+        if moved is not None:
+            sides, errors, tol = moved
     return RegionBoundary(
         loop=loop,
         loop_index=loop_index.astype(np.int64),
