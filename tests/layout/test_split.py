@@ -6,6 +6,7 @@ to the true surface."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -227,3 +228,43 @@ def test_sphere_face_halved(tmp_path: Path) -> None:
     assert sorted(rec.splits.pieces) == [1, 4, 5]
     m = _check(rec, cloud, tmp_path, 1.0)
     assert m["n_faces"] == 10 and m["free_edges"] == 0
+
+
+def _sheet_region(
+    keep: Callable[[NDArray[np.float64]], NDArray[np.bool_]], n_points: int = 20000, seed: int = 0
+) -> samples.LabelledCloud:
+    """The bundled sheet's surface sampled on the part of [0, 2]^2 where ``keep(xy)``, as
+    one segment (label 0)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((3 * n_points, 2)) * 2.0
+    xy = xy[keep(xy)][:n_points]
+    pts = np.column_stack([xy, 0.1 * np.sin(xy[:, 0]) * np.sin(xy[:, 1])])
+    truth = samples.sheet(100)
+    return samples.LabelledCloud("region", pts, np.zeros(len(pts), dtype=np.int64), truth.distance, False)
+
+
+def test_sphere_two_cube_faces_merged(tmp_path: Path) -> None:
+    """Two neighbouring cube-sphere faces as one segment: the ends of their former shared
+    edge are corners of the faces above and below (120 degrees there, 240 in the merged
+    segment) that touch only two labels; they are kept as corners and joined by a cut, which
+    gives the six faces back with every corner 3-valent."""
+    cloud = samples.sphere6(20000)
+    lab = cloud.labels.copy()
+    lab[lab == 1] = 2
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert rec.splits.pieces == {2: [2, 6]} and rec.splits.corners == {2: 6}
+    assert rec.c0_fallback == []
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 6 and m["free_edges"] == 0
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_l_shape_reflex_corner_on_the_open_border(tmp_path: Path, seed: int) -> None:
+    """An L-shaped sheet as one segment: its inner corner (270 degrees) lies on the open
+    border; the continuations of both its sides cut it into three quads (points a noisy
+    corner position leaves outside both cuts join the nearer piece)."""
+    cloud = _sheet_region(lambda xy: ~((xy[:, 0] > 1) & (xy[:, 1] > 1)), seed=seed)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert rec.splits.pieces == {0: [0, 1, 2]} and rec.splits.corners == {0: 6}
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 3 and m["free_edges"] == 8 and m["shared_edges"] == 2

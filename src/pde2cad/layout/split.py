@@ -343,17 +343,26 @@ def _reflex_cells(
     directions: dict[tuple[int, int], NDArray[np.float64]], reflex: NDArray[np.int64],
 ) -> NDArray[np.int64]:
     """Cells of a segment cut by the continuations of both sides of each reflex corner
-    (lines in its PCA plane): an L-shape becomes three quads."""
+    (lines in its PCA plane): an L-shape becomes three quads.
+
+    The fourth quarter the two lines make at a corner lies outside the segment, between
+    its sides; points that fall in it (the corner sits up to a neighbour radius off, and
+    the sides' directions are measured with noise) join the quarter across the nearer
+    line."""
     origin, axes = pca_frame(points)
     xy = (points - origin) @ axes[:2].T
     n = len(xyz)
     cell = np.zeros(len(points), dtype=np.int64)
     for r in reflex:
         at = (xyz[r] - origin) @ axes[:2].T
-        for j in ((r - 1) % n, (r + 1) % n):
-            d = directions[(r, j)] @ axes[:2].T
-            side = (xy - at) @ np.array([-d[1], d[0]]) > 0
-            cell = 2 * cell + side
+        sides = [directions[(r, j)] @ axes[:2].T for j in ((r - 1) % n, (r + 1) % n)]
+        normals = np.array([np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300) for d in sides])
+        dist = (xy - at) @ normals.T  # (P, 2) signed distances to the two lines
+        outside = sum(d / max(float(np.linalg.norm(d)), 1e-300) for d in sides) @ normals.T
+        stray = ((dist > 0) == (outside > 0)).all(axis=1)
+        nearer = np.argmin(np.abs(dist), axis=1)
+        dist[stray, nearer[stray]] *= -1
+        cell = 4 * cell + 2 * (dist[:, 0] > 0) + (dist[:, 1] > 0)
     return cell
 
 
@@ -366,12 +375,17 @@ def _split_one(
     directions, angle = _corner_angles(points, loop, xyz, reach)
     flat = np.flatnonzero((angle >= FLAT_ANGLE) & (angle <= REFLEX_ANGLE))
     reflex = np.flatnonzero(angle > REFLEX_ANGLE)
+    widest = np.sort(np.argsort(-angle, kind="stable")[: max(len(xyz) - 4, 0)])
+    if len(widest) and angle[widest].min() >= FLAT_ANGLE:
+        # All but 4 corners straight or wider: a quad with T-nodes, whatever the widest
+        # read (two cube-sphere faces merged: 240 where the neighbours have a corner).
+        flat, reflex = widest, widest[:0]
     if len(reflex):
         cell = _reflex_cells(points, xyz, directions, reflex)
         if len(np.unique(cell)) > 1:
             return np.unique(cell, return_inverse=True)[1].reshape(-1)
     if len(xyz) - len(flat) == 4:
-        cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
+        cell = _strip_cells(points, loop, xyz, np.setdiff1d(np.arange(len(xyz)), flat), flat)
     else:
         origin, axes = pca_frame(points)
         poly = (xyz - origin) @ axes[:2].T
@@ -433,6 +447,86 @@ def _drop_kinks(
             for label, ids in layout.segment_corners.items()
         },
         open_corners=None if layout.open_corners is None else layout.open_corners[keep],
+        sharp_corners=None if layout.sharp_corners is None else layout.sharp_corners[keep],
+    )
+
+
+def _loop_angles(loop: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """Angle (degrees, 0-180) at every point of a closed loop ((n, 3), in order) between the
+    directions in which the loop leaves it, measured as :func:`_directions` does at a
+    corner (chords from ``LOOP_FROM x reach`` to ``LOOP_TO x reach`` of arc away each way):
+    180 along a straight or gently curved side."""
+    step = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(step[:-1])]
+    total = float(step.sum())
+
+    def at(shift: float) -> NDArray[np.float64]:
+        return np.column_stack([np.interp(arc + shift, arc, loop[:, k], period=total) for k in range(3)])
+
+    back = at(-LOOP_TO * reach) - at(-LOOP_FROM * reach)
+    ahead = at(LOOP_TO * reach) - at(LOOP_FROM * reach)
+    cos = np.sum(back * ahead, axis=1) / np.maximum(
+        np.linalg.norm(back, axis=1) * np.linalg.norm(ahead, axis=1), 1e-300
+    )
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _sharp_turns(loop: NDArray[np.float64], known: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """Points of a segment's loop where it turns at a corner angle (below ``FLAT_ANGLE``)
+    more than ``2 x LOOP_TO x reach`` from every ``known`` corner: the sharpest of each run
+    of such points, at most one per that arc."""
+    if len(loop) < 8:
+        return np.empty((0, 3))
+    angle = _loop_angles(loop, reach)
+    gap = 2 * LOOP_TO * reach
+    if len(known):
+        angle[cKDTree(known).query(loop)[0] <= gap] = 180.0
+    found: list[NDArray[np.float64]] = []
+    for i in np.argsort(angle):
+        if angle[i] >= FLAT_ANGLE:
+            break
+        if all(np.linalg.norm(loop[i] - f) > gap for f in found):
+            found.append(loop[i])
+    return np.array(found).reshape(-1, 3)
+
+
+def _add_sharp_turns(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree
+) -> Layout:
+    """The layout with corners where the loops of two segments turn sharply together away
+    from any corner (:func:`_sharp_turns` of both within ``2 x LOOP_TO x CORNER_REACH``
+    radii; at their midpoint), kept whatever labels they touch (``Layout.sharp_corners``)
+    and given to every segment within ``CORNER_REACH`` radii. Two cube-sphere faces merged:
+    their former shared edge ends at corners of the neighbours (120 degrees there, 240 in
+    the merged segment) that touch only two labels, which the layout drops as kinks of a
+    border. One loop turning alone is no corner (a tube's or a sphere's single segment
+    folds its projected loop)."""
+    reach = CORNER_REACH * layout.radius
+    corners, _ = filter_corners(layout, tree, labels)
+    found = [(label, _sharp_turns(points[loop], corners, reach)) for label, loop in sorted(layout.loops.items())]
+    xyz = np.vstack([f for _, f in found] + [np.empty((0, 3))])
+    owner = np.concatenate([np.full(len(f), label) for label, f in found] + [np.empty(0, dtype=np.int64)])
+    new: list[NDArray[np.float64]] = []
+    for i, j in sorted(cKDTree(xyz).query_pairs(2 * LOOP_TO * reach)) if len(xyz) else []:
+        mid = points[tree.query((xyz[i] + xyz[j]) / 2)[1]]
+        if owner[i] != owner[j] and all(np.linalg.norm(mid - m) > 2 * LOOP_TO * reach for m in new):
+            new.append(mid)
+    if not new:
+        return layout
+    added = np.array(new)
+    n_old = len(layout.corners)
+    segment_corners = {k: list(v) for k, v in layout.segment_corners.items()}
+    for c, xyz in enumerate(added):
+        for label in np.unique(labels[tree.query_ball_point(xyz, reach)]):
+            segment_corners.setdefault(int(label), []).append(n_old + c)
+    none, every = np.zeros(len(added), dtype=bool), np.ones(len(added), dtype=bool)
+    sharp = np.zeros(n_old, dtype=bool) if layout.sharp_corners is None else layout.sharp_corners
+    return dataclasses.replace(
+        layout,
+        corners=np.vstack([layout.corners, added]),
+        segment_corners={k: np.asarray(sorted(v), dtype=np.int64) for k, v in segment_corners.items()},
+        open_corners=None if layout.open_corners is None else np.r_[layout.open_corners, none],
+        sharp_corners=np.r_[sharp, every],
     )
 
 
@@ -553,11 +647,12 @@ def split_segments(
     report = SplitReport()
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
+    layout = _add_sharp_turns(points, out, layout, tree)
     out, layout = _merge_tubes(points, out, layout, tree, report)
     merged = out
     out = _split_cornerless(points, out, layout, tree, report, int(labels.max()) + 1)
     if out is not merged:
-        layout = build_layout(points, out, check=False)
+        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
         source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
@@ -596,7 +691,7 @@ def split_segments(
             report.corners.setdefault(first, len(ids))
             for name in names:
                 source[name] = first
-        layout = build_layout(points, out, check=False)
+        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
     else:
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
