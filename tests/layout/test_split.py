@@ -268,3 +268,55 @@ def test_l_shape_reflex_corner_on_the_open_border(tmp_path: Path, seed: int) -> 
     assert rec.splits.pieces == {0: [0, 1, 2]} and rec.splits.corners == {0: 6}
     m = _check(rec, cloud, tmp_path, 1.0)
     assert m["n_faces"] == 3 and m["free_edges"] == 8 and m["shared_edges"] == 2
+
+
+def _rings(kind: str) -> tuple[samples.LabelledCloud, NDArray[np.int64]]:
+    """Segmentations with two boundary loops per segment: the torus as 4 rings round the
+    tube (quarter tubes) or round the main axis (annuli), the tube as 2 rings along its axis,
+    a 10:1 tube as one segment, the sheet with a hole."""
+    if kind == "torus_tube":
+        cloud = samples.torus(20000)
+        return cloud, np.floor(_tube_angle(cloud.points) / (np.pi / 2)).astype(np.int64) % 4
+    if kind == "torus_axis":
+        cloud = samples.torus(20000)
+        return cloud, cloud.labels % 4
+    if kind == "cylinder_rings":
+        cloud = samples.cylinder(20000, split=(1, 2))
+        return cloud, cloud.labels
+    if kind == "long_tube":
+        cloud = samples.cylinder(40000, radius=0.2, height=4.0)
+        return cloud, np.zeros(len(cloud.points), dtype=np.int64)
+    cloud = _sheet_region(lambda xy: np.hypot(xy[:, 0] - 1, xy[:, 1] - 1) > 0.4)
+    return cloud, cloud.labels
+
+
+@pytest.mark.parametrize(
+    "kind, faces, free",
+    [("torus_tube", 48, 0), ("torus_axis", 16, 0), ("cylinder_rings", 8, 8),
+     ("long_tube", 52, 8), ("hole", 4, 8)],
+)
+def test_segments_with_two_boundary_loops(tmp_path: Path, kind: str, faces: int, free: int) -> None:
+    """Each ring is cut into 4 sectors (and across into near-square slices where it is long:
+    the quarter tubes in 3, the 10:1 tube in 13) whose cuts end where the ring cut before
+    ends its cuts on the shared loop, or at the corners of an outer loop (the holed sheet's
+    four): every corner 4-valent, exact C1."""
+    cloud, lab = _rings(kind)
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert sorted(rec.splits.rings) == sorted(int(v) for v in np.unique(lab))
+    assert rec.c0_fallback == [] and all(rec.network.regular.values())
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == faces and m["free_edges"] == free
+    assert "2 boundary loops" in rec.splits.summary()
+
+
+def test_segment_with_two_holes_is_refused_by_name() -> None:
+    """Three boundary loops (a sheet with two holes as one segment) are not cut: the message
+    names the segment and the fix, instead of one patch over both holes."""
+    from pde2cad.errors import InputError
+
+    def keep(xy: NDArray[np.float64]) -> NDArray[np.bool_]:
+        return (np.hypot(xy[:, 0] - 0.6, xy[:, 1] - 1) > 0.3) & (np.hypot(xy[:, 0] - 1.4, xy[:, 1] - 1) > 0.3)
+
+    cloud = _sheet_region(keep)
+    with pytest.raises(InputError, match="segment 0 has 3 boundary loops"):
+        reconstruct(cloud.points, cloud.labels, continuity="c1")

@@ -56,6 +56,7 @@ from scipy.spatial import cKDTree
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import Layout, build_layout
 from pde2cad.layout.edges import filter_corners
+from pde2cad.layout.rings import split_rings
 from pde2cad.surfaces.region import pca_frame
 
 #: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
@@ -106,17 +107,23 @@ class SplitReport:
     merged : dict[int, int]
         Input labels merged into another before splitting (two segments meeting along two
         borders, e.g. the halves of a tube, together a segment without corners).
+    rings : list[int]
+        Input labels with two boundary loops (rings, tubes, sheets with a hole), cut by
+        :func:`~pde2cad.layout.rings.split_rings` (their ``corners``: 0).
     """
 
     pieces: dict[int, list[int]] = field(default_factory=dict)
     corners: dict[int, int] = field(default_factory=dict)
     merged: dict[int, int] = field(default_factory=dict)
+    rings: list[int] = field(default_factory=list)
 
     def summary(self) -> str:
         """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
         lines = [f"segment {b}: merged into {a}" for b, a in sorted(self.merged.items())]
         return "\n".join(lines + [
-            f"segment {label}: {self.corners[label]} corners -> {len(p)} pieces {p}"
+            f"segment {label}: "
+            + ("2 boundary loops" if label in self.rings else f"{self.corners[label]} corners")
+            + f" -> {len(p)} pieces {p}"
             for label, p in sorted(self.pieces.items())
         ])
 
@@ -612,6 +619,21 @@ def _split_cornerless(
     return out
 
 
+def _cut_rings(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, first_new: int,
+) -> NDArray[np.int64]:
+    """Labels with every segment of two boundary loops (a ring, a tube, a sheet with a hole)
+    cut into quads by :func:`~pde2cad.layout.rings.split_rings`, recorded in ``report``
+    (``rings``)."""
+    out, pieces = split_rings(points, labels, layout, tree, first_new)
+    for label, names in pieces.items():
+        report.pieces[label] = names
+        report.corners[label] = 0
+        report.rings.append(label)
+    return out
+
+
 def split_segments(
     points: NDArray[np.float64],
     labels: NDArray[np.int64],
@@ -647,13 +669,16 @@ def split_segments(
     report = SplitReport()
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
+    out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
+    if out is not labels:
+        layout = build_layout(points, out, check=False)
     layout = _add_sharp_turns(points, out, layout, tree)
     out, layout = _merge_tubes(points, out, layout, tree, report)
     merged = out
-    out = _split_cornerless(points, out, layout, tree, report, int(labels.max()) + 1)
+    out = _split_cornerless(points, out, layout, tree, report, max(int(out.max()), int(labels.max())) + 1)
     if out is not merged:
         layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
-        source = {p: first for first, pieces in report.pieces.items() for p in pieces}
+    source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
