@@ -31,13 +31,14 @@ def _true_error(rec: Reconstruction, cloud: samples.LabelledCloud) -> float:
 
 
 def _check(
-    rec: Reconstruction, cloud: samples.LabelledCloud, tmp_path: Path, max_angle: float
+    rec: Reconstruction, cloud: samples.LabelledCloud, tmp_path: Path, max_angle: float,
+    max_error: float = 1e-4,
 ) -> dict:  # type: ignore[type-arg]
     m = measure(read_step(rec.write_step(tmp_path / "split.step")))
     assert m["valid"] and m["closed"] == cloud.closed
     assert m["max_gap"] <= 1e-7 * cloud.diagonal
     assert m["max_angle_deg"] <= max_angle
-    assert _true_error(rec, cloud) <= 1e-4
+    assert _true_error(rec, cloud) <= max_error
     assert all(len(ids) in (3, 4) for ids in rec.network.loops.values())
     return m
 
@@ -270,12 +271,12 @@ def test_l_shape_reflex_corner_on_the_open_border(tmp_path: Path, seed: int) -> 
     assert m["n_faces"] == 3 and m["free_edges"] == 8 and m["shared_edges"] == 2
 
 
-def _rings(kind: str) -> tuple[samples.LabelledCloud, NDArray[np.int64]]:
+def _rings(kind: str, noise: float = 0.0) -> tuple[samples.LabelledCloud, NDArray[np.int64]]:
     """Segmentations with two boundary loops per segment: the torus as 4 rings round the
     tube (quarter tubes) or round the main axis (annuli), the tube as 2 rings along its axis,
     a 10:1 tube as one segment, the sheet with a hole."""
     if kind == "torus_tube":
-        cloud = samples.torus(20000)
+        cloud = samples.torus(20000, noise=noise)
         return cloud, np.floor(_tube_angle(cloud.points) / (np.pi / 2)).astype(np.int64) % 4
     if kind == "torus_axis":
         cloud = samples.torus(20000)
@@ -292,19 +293,21 @@ def _rings(kind: str) -> tuple[samples.LabelledCloud, NDArray[np.int64]]:
 
 @pytest.mark.parametrize(
     "kind, faces, free",
-    [("torus_tube", 48, 0), ("torus_axis", 16, 0), ("cylinder_rings", 8, 8),
-     ("long_tube", 52, 8), ("hole", 4, 8)],
+    [("torus_tube", 16, 0), ("torus_axis", 16, 0), ("cylinder_rings", 8, 8),
+     ("long_tube", 52, 8), ("hole", 4, 8), ("noisy_torus_tube", 16, 0)],
 )
 def test_segments_with_two_boundary_loops(tmp_path: Path, kind: str, faces: int, free: int) -> None:
-    """Each ring is cut into 4 sectors (and across into near-square slices where it is long:
-    the quarter tubes in 3, the 10:1 tube in 13) whose cuts end where the ring cut before
-    ends its cuts on the shared loop, or at the corners of an outer loop (the holed sheet's
-    four): every corner 4-valent, exact C1."""
-    cloud, lab = _rings(kind)
+    """Each ring is cut into 4 sectors (and across into slices where it is 3 times longer
+    than they are wide: the 10:1 tube in 13) whose cuts end where the ring cut before ends
+    its cuts on the shared loop, or at the corners of an outer loop (the holed sheet's
+    four): every corner 4-valent, exact C1. With 0.2 % noise the mean distance is the
+    noise's (4.4e-4; sigma 2e-3)."""
+    noisy = kind.startswith("noisy_")
+    cloud, lab = _rings(kind.removeprefix("noisy_"), noise=0.002 if noisy else 0.0)
     rec = reconstruct(cloud.points, lab, continuity="c1")
     assert sorted(rec.splits.rings) == sorted(int(v) for v in np.unique(lab))
     assert rec.c0_fallback == [] and all(rec.network.regular.values())
-    m = _check(rec, cloud, tmp_path, 1.0)
+    m = _check(rec, cloud, tmp_path, 1.0, 1e-3 if noisy else 1e-4)
     assert m["n_faces"] == faces and m["free_edges"] == free
     assert "2 boundary loops" in rec.splits.summary()
 
