@@ -323,3 +323,43 @@ def test_segment_with_two_holes_is_refused_by_name() -> None:
     cloud = _sheet_region(keep)
     with pytest.raises(InputError, match="segment 0 has 3 boundary loops"):
         reconstruct(cloud.points, cloud.labels, continuity="c1")
+
+
+def _normal_regions(points: NDArray[np.float64], normals: NDArray[np.float64]) -> NDArray[np.int64]:
+    """A region-growing segmentation as CloudCompare makes one: points grouped by the
+    nearest of the 6 axis directions to their normal, each connected group (10 nearest
+    neighbours) a label; groups under 50 points join a neighbouring group."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    big = np.argmax(np.abs(normals), axis=1)
+    kind = 2 * big + (normals[np.arange(len(normals)), big] > 0)
+    _, idx = cKDTree(points).query(points, k=11)
+    rows, cols = np.repeat(np.arange(len(points)), 10), idx[:, 1:].ravel()
+    same = kind[rows] == kind[cols]
+    graph = coo_matrix((np.ones(same.sum()), (rows[same], cols[same])), shape=(len(points),) * 2)
+    comp = connected_components(graph, directed=False)[1]
+    for _ in range(5):
+        small = np.bincount(comp)[comp] < 50
+        if not small.any():
+            break
+        near = comp[idx[small, 1:]]
+        big_enough = np.bincount(comp)[near] >= 50
+        comp[small] = np.where(big_enough.any(axis=1), near[np.arange(len(near)), big_enough.argmax(axis=1)], comp[small])
+    return np.unique(comp, return_inverse=True)[1].reshape(-1).astype(np.int64)
+
+
+def test_torus_region_growing_by_normals(tmp_path: Path) -> None:
+    """The torus segmented by normal direction: the top and bottom (normals +-z) are annuli
+    round the axis, cut as rings; the 8 side regions (outer and inner, +-x, +-y) are quads.
+    16 faces, exact C1."""
+    cloud = samples.torus(20000)
+    xy = cloud.points[:, :2] / np.hypot(cloud.points[:, 0], cloud.points[:, 1])[:, None]
+    normals = cloud.points - np.column_stack([xy, np.zeros(len(xy))])
+    lab = _normal_regions(cloud.points, normals / np.linalg.norm(normals, axis=1, keepdims=True))
+    assert len(np.unique(lab)) == 10
+    rec = reconstruct(cloud.points, lab, continuity="c1")
+    assert len(rec.splits.rings) == 2 and rec.c0_fallback == []
+    m = _check(rec, cloud, tmp_path, 1.0)
+    assert m["n_faces"] == 16 and m["free_edges"] == 0
