@@ -36,9 +36,14 @@ between :func:`~pde2cad.layout.adjacency.build_layout` and
 A piece with fewer than ``MIN_PIECE_POINTS`` points, or a piece still not 3/4-sided after the
 rounds, raises an :class:`~pde2cad.errors.InputError` naming the input segment.
 
-Limits: the layout must see the corners. An L-shape's reflex corner on a border between two
-segments reads as a border kink, not a corner (the L then stays unsplit, with a message);
-a ring (annulus) has two boundary loops, which the layout's one loop per segment misses.
+Before these steps, segments with two boundary loops (rings, tubes, a sheet with a hole) are
+cut by :func:`~pde2cad.layout.rings.split_rings`, and before every round the layout gets
+the corners where two segments' loops turn sharply together (:func:`_add_sharp_turns`: the
+ends of the former shared edge of two merged cube-sphere faces touch only two labels, which
+the layout drops as kinks). A segment all but 4 of whose corners read straight or wider is
+a quad with T-nodes (c), whatever the widest read (240 degrees there).
+
+Limits: the layout must see the corners; a segment with 3 or more boundary loops is refused.
 """
 
 from __future__ import annotations
