@@ -326,13 +326,15 @@ def _write(path: Path, data: bytes | str) -> Path:
     return path
 
 
-def _l_shape(tmp_path: Path) -> Path:
-    """[0, 3]^2 with an L-shaped segment (6 corners): no 3- or 4-sided patch fits it."""
+def _two_holes(tmp_path: Path) -> Path:
+    """[0, 3]^2 with two round holes, one segment (label 7): 3 boundary loops, which no
+    automatic split cuts (an L-shaped segment, refused here before, is now split)."""
     g = np.linspace(0.0, 3.0, 90)
     u, v = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
-    lab = np.where((u > 1.0) & (v > 1.0), 2, 7)
-    return write_ply(tmp_path / "l.ply", np.column_stack([u, v, np.zeros_like(u)]),
-                     {"scalar_Label": lab.astype(float)})
+    keep = (np.hypot(u - 0.9, v - 1.5) > 0.45) & (np.hypot(u - 2.1, v - 1.5) > 0.45)
+    u, v = u[keep], v[keep]
+    return write_ply(tmp_path / "h.ply", np.column_stack([u, v, np.zeros_like(u)]),
+                     {"scalar_Label": np.full(len(u), 7.0)})
 
 
 def _cloud(tmp_path: Path) -> Path:
@@ -364,7 +366,7 @@ def _cloud(tmp_path: Path) -> Path:
          2, "have 399 values but the cloud has 400 points"),
         (lambda d: write_ply(d / "f.ply", sheet(20)[0], {"scalar_Label": np.full(400, 0.5)}), [], 2,
          "must be integers"),
-        (_l_shape, [], 2, "segment 7 has"),
+        (_two_holes, [], 2, "segment 7 has 3 boundary loops"),
     ],
 )
 def test_bad_input_exits_2_and_writes_nothing(
@@ -377,7 +379,7 @@ def test_bad_input_exits_2_and_writes_nothing(
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     if "segment 7" in message:
-        assert "corners" in err and "3 or 4" in err
+        assert "split it" in err
     assert_nothing_written(tmp_path)
 
 

@@ -169,6 +169,10 @@ class Layout:
         Whether each corner lies on the open boundary of the cloud: its cluster holds a (b)
         candidate (a border meets the open boundary) or a sharp turn of an open run of a loop.
         Corners of two segments that are not (kinks of a border) are no patch corners.
+    sharp_corners : (C,) bool or None
+        Corners of two segments kept all the same: sharp turns of a border (where a merged
+        segment meets its neighbour at a corner of the neighbour's), found by
+        :func:`~pde2cad.layout.split.split_segments`.
     """
 
     labels_present: NDArray[np.int64]
@@ -182,6 +186,7 @@ class Layout:
     loops: dict[int, NDArray[np.int64]] = field(default_factory=dict)
     tree: cKDTree | None = field(default=None, repr=False, compare=False)
     open_corners: NDArray[np.bool_] | None = None
+    sharp_corners: NDArray[np.bool_] | None = None
 
 
 # --------------------------------------------------------------------------- checks

@@ -195,7 +195,8 @@ def key_of(a: int, b: int) -> Key:
 def filter_corners(
     layout: Layout, tree: cKDTree, labels: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], dict[int, list[int]]]:
-    """Drop border kinks (two segments, no open boundary near); renumber the corners."""
+    """Drop border kinks (two segments, no open boundary near, not a sharp turn); renumber
+    the corners."""
     reach = CLUSTER_FACTOR * layout.radius
     opened = [b for b in layout.open_boundary.values() if len(b)]
     open_tree = cKDTree(np.vstack(opened)) if opened else None
@@ -212,7 +213,8 @@ def filter_corners(
             # Several open-boundary points: a single one can be a border point whose
             # neighbours happen to share its label (random sampling), not the open boundary.
             near_open = open_tree is not None and len(open_tree.query_ball_point(corner, reach)) >= 3
-        keep.append(n_labels >= 3 or near_open or n_labels == 1)
+        sharp = layout.sharp_corners is not None and bool(layout.sharp_corners[i])
+        keep.append(n_labels >= 3 or near_open or n_labels == 1 or sharp)
     keep_ids = np.flatnonzero(keep)
     new_id = {int(old): new for new, old in enumerate(keep_ids)}
     seg = {

@@ -36,9 +36,14 @@ between :func:`~pde2cad.layout.adjacency.build_layout` and
 A piece with fewer than ``MIN_PIECE_POINTS`` points, or a piece still not 3/4-sided after the
 rounds, raises an :class:`~pde2cad.errors.InputError` naming the input segment.
 
-Limits: the layout must see the corners. An L-shape's reflex corner on a border between two
-segments reads as a border kink, not a corner (the L then stays unsplit, with a message);
-a ring (annulus) has two boundary loops, which the layout's one loop per segment misses.
+Before these steps, segments with two boundary loops (rings, tubes, a sheet with a hole) are
+cut by :func:`~pde2cad.layout.rings.split_rings`, and before every round the layout gets
+the corners where two segments' loops turn sharply together (:func:`_add_sharp_turns`: the
+ends of the former shared edge of two merged cube-sphere faces touch only two labels, which
+the layout drops as kinks). A segment all but 4 of whose corners read straight or wider is
+a quad with T-nodes (c), whatever the widest read (240 degrees there).
+
+Limits: the layout must see the corners; a segment with 3 or more boundary loops is refused.
 """
 
 from __future__ import annotations
@@ -56,6 +61,7 @@ from scipy.spatial import cKDTree
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import Layout, build_layout
 from pde2cad.layout.edges import filter_corners
+from pde2cad.layout.rings import split_rings
 from pde2cad.surfaces.region import pca_frame
 
 #: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
@@ -106,17 +112,23 @@ class SplitReport:
     merged : dict[int, int]
         Input labels merged into another before splitting (two segments meeting along two
         borders, e.g. the halves of a tube, together a segment without corners).
+    rings : list[int]
+        Input labels with two boundary loops (rings, tubes, sheets with a hole), cut by
+        :func:`~pde2cad.layout.rings.split_rings` (their ``corners``: 0).
     """
 
     pieces: dict[int, list[int]] = field(default_factory=dict)
     corners: dict[int, int] = field(default_factory=dict)
     merged: dict[int, int] = field(default_factory=dict)
+    rings: list[int] = field(default_factory=list)
 
     def summary(self) -> str:
         """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
         lines = [f"segment {b}: merged into {a}" for b, a in sorted(self.merged.items())]
         return "\n".join(lines + [
-            f"segment {label}: {self.corners[label]} corners -> {len(p)} pieces {p}"
+            f"segment {label}: "
+            + ("2 boundary loops" if label in self.rings else f"{self.corners[label]} corners")
+            + f" -> {len(p)} pieces {p}"
             for label, p in sorted(self.pieces.items())
         ])
 
@@ -343,17 +355,26 @@ def _reflex_cells(
     directions: dict[tuple[int, int], NDArray[np.float64]], reflex: NDArray[np.int64],
 ) -> NDArray[np.int64]:
     """Cells of a segment cut by the continuations of both sides of each reflex corner
-    (lines in its PCA plane): an L-shape becomes three quads."""
+    (lines in its PCA plane): an L-shape becomes three quads.
+
+    The fourth quarter the two lines make at a corner lies outside the segment, between
+    its sides; points that fall in it (the corner sits up to a neighbour radius off, and
+    the sides' directions are measured with noise) join the quarter across the nearer
+    line."""
     origin, axes = pca_frame(points)
     xy = (points - origin) @ axes[:2].T
     n = len(xyz)
     cell = np.zeros(len(points), dtype=np.int64)
     for r in reflex:
         at = (xyz[r] - origin) @ axes[:2].T
-        for j in ((r - 1) % n, (r + 1) % n):
-            d = directions[(r, j)] @ axes[:2].T
-            side = (xy - at) @ np.array([-d[1], d[0]]) > 0
-            cell = 2 * cell + side
+        sides = [directions[(r, j)] @ axes[:2].T for j in ((r - 1) % n, (r + 1) % n)]
+        normals = np.array([np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300) for d in sides])
+        dist = (xy - at) @ normals.T  # (P, 2) signed distances to the two lines
+        outside = sum(d / max(float(np.linalg.norm(d)), 1e-300) for d in sides) @ normals.T
+        stray = ((dist > 0) == (outside > 0)).all(axis=1)
+        nearer = np.argmin(np.abs(dist), axis=1)
+        dist[stray, nearer[stray]] *= -1
+        cell = 4 * cell + 2 * (dist[:, 0] > 0) + (dist[:, 1] > 0)
     return cell
 
 
@@ -366,12 +387,17 @@ def _split_one(
     directions, angle = _corner_angles(points, loop, xyz, reach)
     flat = np.flatnonzero((angle >= FLAT_ANGLE) & (angle <= REFLEX_ANGLE))
     reflex = np.flatnonzero(angle > REFLEX_ANGLE)
+    widest = np.sort(np.argsort(-angle, kind="stable")[: max(len(xyz) - 4, 0)])
+    if len(widest) and angle[widest].min() >= FLAT_ANGLE:
+        # All but 4 corners straight or wider: a quad with T-nodes, whatever the widest
+        # read (two cube-sphere faces merged: 240 where the neighbours have a corner).
+        flat, reflex = widest, widest[:0]
     if len(reflex):
         cell = _reflex_cells(points, xyz, directions, reflex)
         if len(np.unique(cell)) > 1:
             return np.unique(cell, return_inverse=True)[1].reshape(-1)
     if len(xyz) - len(flat) == 4:
-        cell = _strip_cells(points, loop, xyz, np.flatnonzero(angle < FLAT_ANGLE), flat)
+        cell = _strip_cells(points, loop, xyz, np.setdiff1d(np.arange(len(xyz)), flat), flat)
     else:
         origin, axes = pca_frame(points)
         poly = (xyz - origin) @ axes[:2].T
@@ -433,6 +459,86 @@ def _drop_kinks(
             for label, ids in layout.segment_corners.items()
         },
         open_corners=None if layout.open_corners is None else layout.open_corners[keep],
+        sharp_corners=None if layout.sharp_corners is None else layout.sharp_corners[keep],
+    )
+
+
+def _loop_angles(loop: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """Angle (degrees, 0-180) at every point of a closed loop ((n, 3), in order) between the
+    directions in which the loop leaves it, measured as :func:`_directions` does at a
+    corner (chords from ``LOOP_FROM x reach`` to ``LOOP_TO x reach`` of arc away each way):
+    180 along a straight or gently curved side."""
+    step = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(step[:-1])]
+    total = float(step.sum())
+
+    def at(shift: float) -> NDArray[np.float64]:
+        return np.column_stack([np.interp(arc + shift, arc, loop[:, k], period=total) for k in range(3)])
+
+    back = at(-LOOP_TO * reach) - at(-LOOP_FROM * reach)
+    ahead = at(LOOP_TO * reach) - at(LOOP_FROM * reach)
+    cos = np.sum(back * ahead, axis=1) / np.maximum(
+        np.linalg.norm(back, axis=1) * np.linalg.norm(ahead, axis=1), 1e-300
+    )
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _sharp_turns(loop: NDArray[np.float64], known: NDArray[np.float64], reach: float) -> NDArray[np.float64]:
+    """Points of a segment's loop where it turns at a corner angle (below ``FLAT_ANGLE``)
+    more than ``2 x LOOP_TO x reach`` from every ``known`` corner: the sharpest of each run
+    of such points, at most one per that arc."""
+    if len(loop) < 8:
+        return np.empty((0, 3))
+    angle = _loop_angles(loop, reach)
+    gap = 2 * LOOP_TO * reach
+    if len(known):
+        angle[cKDTree(known).query(loop)[0] <= gap] = 180.0
+    found: list[NDArray[np.float64]] = []
+    for i in np.argsort(angle):
+        if angle[i] >= FLAT_ANGLE:
+            break
+        if all(np.linalg.norm(loop[i] - f) > gap for f in found):
+            found.append(loop[i])
+    return np.array(found).reshape(-1, 3)
+
+
+def _add_sharp_turns(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree
+) -> Layout:
+    """The layout with corners where the loops of two segments turn sharply together away
+    from any corner (:func:`_sharp_turns` of both within ``2 x LOOP_TO x CORNER_REACH``
+    radii; at their midpoint), kept whatever labels they touch (``Layout.sharp_corners``)
+    and given to every segment within ``CORNER_REACH`` radii. Two cube-sphere faces merged:
+    their former shared edge ends at corners of the neighbours (120 degrees there, 240 in
+    the merged segment) that touch only two labels, which the layout drops as kinks of a
+    border. One loop turning alone is no corner (a tube's or a sphere's single segment
+    folds its projected loop)."""
+    reach = CORNER_REACH * layout.radius
+    corners, _ = filter_corners(layout, tree, labels)
+    found = [(label, _sharp_turns(points[loop], corners, reach)) for label, loop in sorted(layout.loops.items())]
+    xyz = np.vstack([f for _, f in found] + [np.empty((0, 3))])
+    owner = np.concatenate([np.full(len(f), label) for label, f in found] + [np.empty(0, dtype=np.int64)])
+    new: list[NDArray[np.float64]] = []
+    for i, j in sorted(cKDTree(xyz).query_pairs(2 * LOOP_TO * reach)) if len(xyz) else []:
+        mid = points[tree.query((xyz[i] + xyz[j]) / 2)[1]]
+        if owner[i] != owner[j] and all(np.linalg.norm(mid - m) > 2 * LOOP_TO * reach for m in new):
+            new.append(mid)
+    if not new:
+        return layout
+    added = np.array(new)
+    n_old = len(layout.corners)
+    segment_corners = {k: list(v) for k, v in layout.segment_corners.items()}
+    for c, xyz in enumerate(added):
+        for label in np.unique(labels[tree.query_ball_point(xyz, reach)]):
+            segment_corners.setdefault(int(label), []).append(n_old + c)
+    none, every = np.zeros(len(added), dtype=bool), np.ones(len(added), dtype=bool)
+    sharp = np.zeros(n_old, dtype=bool) if layout.sharp_corners is None else layout.sharp_corners
+    return dataclasses.replace(
+        layout,
+        corners=np.vstack([layout.corners, added]),
+        segment_corners={k: np.asarray(sorted(v), dtype=np.int64) for k, v in segment_corners.items()},
+        open_corners=None if layout.open_corners is None else np.r_[layout.open_corners, none],
+        sharp_corners=np.r_[sharp, every],
     )
 
 
@@ -518,6 +624,21 @@ def _split_cornerless(
     return out
 
 
+def _cut_rings(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, first_new: int,
+) -> NDArray[np.int64]:
+    """Labels with every segment of two boundary loops (a ring, a tube, a sheet with a hole)
+    cut into quads by :func:`~pde2cad.layout.rings.split_rings`, recorded in ``report``
+    (``rings``)."""
+    out, pieces = split_rings(points, labels, layout, tree, first_new)
+    for label, names in pieces.items():
+        report.pieces[label] = names
+        report.corners[label] = 0
+        report.rings.append(label)
+    return out
+
+
 def split_segments(
     points: NDArray[np.float64],
     labels: NDArray[np.int64],
@@ -553,12 +674,16 @@ def split_segments(
     report = SplitReport()
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
+    out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
+    if out is not labels:
+        layout = build_layout(points, out, check=False)
+    layout = _add_sharp_turns(points, out, layout, tree)
     out, layout = _merge_tubes(points, out, layout, tree, report)
     merged = out
-    out = _split_cornerless(points, out, layout, tree, report, int(labels.max()) + 1)
+    out = _split_cornerless(points, out, layout, tree, report, max(int(out.max()), int(labels.max())) + 1)
     if out is not merged:
-        layout = build_layout(points, out, check=False)
-        source = {p: first for first, pieces in report.pieces.items() for p in pieces}
+        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
+    source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
@@ -596,7 +721,7 @@ def split_segments(
             report.corners.setdefault(first, len(ids))
             for name in names:
                 source[name] = first
-        layout = build_layout(points, out, check=False)
+        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
     else:
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
