@@ -10,7 +10,8 @@ reads the files and runs the libraries.
    normals (oriented over a tangent-plane graph) and screened Poisson on a subsample,
    trimmed where Poisson extrapolated far from the points.
 3. :func:`quad_remesh`: Instant Meshes (``pyinstantmeshes``) makes a coarse pure-quad mesh
-   aligned to the curvature and the creases (``crease_angle``).
+   aligned to the curvature and the creases (``crease_angle``); the best of a few, relaxed
+   on the surface, is kept (:func:`pde2cad.layout.auto.best_layout`).
 4. :func:`auto_layout`: 1-3 plus :func:`pde2cad.layout.auto.label_points` /
    :func:`~pde2cad.layout.auto.clean_labels`: one label per point, each a 3- or 4-sided
    patch, for :func:`pde2cad.reconstruct.reconstruct`.
@@ -32,12 +33,14 @@ from pde2cad.layout.auto import (
     CREASE_ANGLE,
     TURN_PER_PATCH,
     AutoLayout,
+    best_layout,
     clean_labels,
     crease_edges,
     curvature_radius,
     dissolve_doublets,
     label_points,
     layout_summary,
+    point_normals,
     quads_of,
 )
 
@@ -277,8 +280,11 @@ def auto_layout(
     else:
         vertices, tris = surface.vertices, surface.triangles
     count = patch_count(surface.points, vertices, tris, patches, patch_size, crease_angle)
-    q_vertices, faces = quad_remesh(vertices, tris, count, crease_angle)
-    labels = clean_labels(surface.points, label_points(surface.points, q_vertices, faces))
+    normals = point_normals(surface.points)
+    q_vertices, faces, _ = best_layout(
+        surface.points, lambda: quad_remesh(vertices, tris, count, crease_angle), normals=normals)
+    labels = clean_labels(surface.points,
+                          label_points(surface.points, q_vertices, faces, normals=normals))
     creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
     summary = layout_summary(faces, labels, None if creases is None else len(creases))
     return AutoLayout(labels, q_vertices, faces, summary)
