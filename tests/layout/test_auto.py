@@ -11,14 +11,17 @@ from pde2cad.layout.auto import (
     clean_labels,
     corner_angles,
     crease_edges,
+    crease_regions,
     curvature_radius,
     dissolve_doublets,
     label_points,
     layout_quality,
     layout_summary,
     point_normals,
+    point_regions,
     quads_of,
     relax_layout,
+    single_patch_regions,
 )
 
 # A unit cube: 8 corners, 6 quads, each quad as two consecutive triangles (a, b, c), (a, c, d).
@@ -226,3 +229,72 @@ def test_point_normals_of_a_noisy_sphere() -> None:
     n = point_normals(noisy)
     cos = np.abs(np.einsum("ij,ij->i", n, pts))
     assert np.degrees(np.arccos(np.median(cos))) < 5.0
+
+
+def _box_face(points: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Which of a centred box's 6 faces each point lies on (axis * 2 + side)."""
+    rel = np.abs(points) / half
+    axis = rel.argmax(axis=1)
+    side = (points[np.arange(len(points)), axis] > 0).astype(int)
+    return axis * 2 + side
+
+
+def test_crease_regions_of_a_box_are_its_faces() -> None:
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box((1.0, 2.0, 3.0)).subdivide()
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    region = crease_regions(v, f, 30.0)
+    truth = _box_face(v[f].mean(axis=1), np.array([0.5, 1.0, 1.5]))
+    assert region.max() + 1 == 6
+    # One region per box face: the map region -> face is a bijection.
+    pairs = np.unique(np.column_stack([region, truth]), axis=0)
+    assert len(pairs) == 6 and len(np.unique(pairs[:, 1])) == 6
+
+
+def test_single_patch_regions_are_flat_disks() -> None:
+    """A box: 6 flat disks. A cylinder: its caps are, its side (an annulus) is not. A
+    sphere (one closed region) is not."""
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    assert single_patch_regions(v, f, crease_regions(v, f)).all()
+    cyl = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=48)
+    v, f = np.asarray(cyl.vertices), np.asarray(cyl.faces)
+    region = crease_regions(v, f)
+    ok = single_patch_regions(v, f, region)
+    assert region.max() + 1 == 3
+    cap = np.array([np.abs(np.einsum("ij,j->i", _tri_normals(v, f[region == r]), [0, 0, 1.0])).min()
+                    > 0.99 for r in range(3)])
+    assert (ok == cap).all() and cap.sum() == 2
+    ball = trimesh.creation.icosphere(3)
+    v, f = np.asarray(ball.vertices), np.asarray(ball.faces)
+    assert not single_patch_regions(v, f, crease_regions(v, f)).any()
+
+
+def _tri_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def test_point_regions_and_region_bounded_labels_on_a_box() -> None:
+    """Points on a 12-triangle box take their face's region (its long triangles sampled
+    finely); labels cleaned with those regions never span a crease."""
+    trimesh = pytest.importorskip("trimesh")
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    pts = np.asarray(trimesh.sample.sample_surface(box, 30000, seed=3)[0])
+    region = point_regions(pts, v, f, crease_regions(v, f))
+    truth = _box_face(pts, np.array([0.5, 1.0, 1.5]))
+    owner = {r: np.bincount(truth[region == r]).argmax() for r in np.unique(region)}
+    wrong = np.array([owner[r] for r in region]) != truth
+    assert len(owner) == 6 and len(set(owner.values())) == 6
+    # The points lie in their triangles: only points on a crease itself may go either way.
+    dist_to_crease = np.sort(np.abs(np.abs(pts) - [0.5, 1.0, 1.5]), axis=1)[:, 1]
+    assert wrong.mean() < 2e-4 and (dist_to_crease[wrong] < 1e-9).all()
+    # Labels cutting across the box (halves along x) become one label per (half, face).
+    lab = (pts[:, 0] > 0.1).astype(np.int64)
+    clean = clean_labels(pts, lab, regions=region)
+    for k in np.unique(clean):
+        faces_of_k = np.bincount(truth[clean == k], minlength=6)
+        assert faces_of_k.max() >= 0.99 * faces_of_k.sum()
+    assert len(np.unique(clean)) == 10  # the 4 faces along x halve, the 2 ends do not

@@ -36,12 +36,15 @@ from pde2cad.layout.auto import (
     best_layout,
     clean_labels,
     crease_edges,
+    crease_regions,
     curvature_radius,
     dissolve_doublets,
     label_points,
     layout_summary,
     point_normals,
+    point_regions,
     quads_of,
+    single_patch_regions,
 )
 
 MESH_SUFFIXES = (".off", ".stl", ".obj", ".ply", ".glb", ".gltf")
@@ -283,9 +286,17 @@ def auto_layout(
     normals = point_normals(surface.points)
     q_vertices, faces, _ = best_layout(
         surface.points, lambda: quad_remesh(vertices, tris, count, crease_angle), normals=normals)
-    labels = clean_labels(surface.points,
-                          label_points(surface.points, q_vertices, faces, normals=normals))
     creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
+    labels = label_points(surface.points, q_vertices, faces, normals=normals)
+    regions = None
+    if creases is not None and len(creases):
+        # Patches end at the creases: labels split by smooth region, and a flat-ish disk
+        # between creases is one patch.
+        tri_region = crease_regions(vertices, tris, crease_angle)
+        regions = point_regions(surface.points, vertices, tris, tri_region)
+        whole = single_patch_regions(vertices, tris, tri_region)[regions]
+        labels[whole] = len(faces) + regions[whole]
+    labels = clean_labels(surface.points, labels, regions=regions)
     summary = layout_summary(faces, labels, None if creases is None else len(creases))
     return AutoLayout(labels, q_vertices, faces, summary)
 

@@ -47,6 +47,10 @@ RELAX_STEP = 0.5
 #: rejected ones >= 141).
 LAYOUT_TRIES = 4
 GOOD_LAYOUT = 136.0
+#: Largest normal turn (deg) of a crease-bounded disk that becomes a single patch.
+SINGLE_PATCH_TURN = 60.0
+#: Nearest triangle samples whose triangles compete for a point in :func:`point_regions`.
+REGION_CANDIDATES = 6
 #: Neighbours whose principal axes give a point's normal.
 NORMAL_NEIGHBOURS = 16
 #: Neighbours per point of the graph that decides connectivity of the labels.
@@ -405,23 +409,17 @@ def _nearest_sample_labels(
 ) -> NDArray[np.int64]:
     """Label of each point by its nearest face sample (the fallback of :func:`label_points`).
 
-    1. Each fan triangle sampled on a barycentric grid with about one step per point spacing
-       (at least ``SAMPLES_PER_SIDE``, at most 4x that).
+    1. Each fan triangle sampled about one point spacing fine (:func:`_sample_triangles`;
+       a median side takes ``SAMPLES_PER_SIDE`` to 4x that steps).
     2. Each sample moves to its nearest point, so the samples lie on the surface even where
        the coarse face cuts a chord through it.
     3. One KD-tree query per point gives its nearest sample, whose face is the label.
     """
     tree = cKDTree(points)
-    side = np.linalg.norm(vertices[tris[:, 1]] - vertices[tris[:, 0]], axis=1)
-    spacing = float(np.median(tree.query(points[:: max(1, len(points) // 2000)], k=2)[0][:, 1]))
-    s = int(np.clip(np.ceil(np.median(side) / max(spacing, 1e-300)), SAMPLES_PER_SIDE,
-                    4 * SAMPLES_PER_SIDE))
-    i, j = np.meshgrid(np.arange(s + 1), np.arange(s + 1))
-    keep = i + j <= s
-    bary = np.stack([i[keep], j[keep]], axis=1) / s
-    weights = np.column_stack([1.0 - bary.sum(axis=1), bary])
-    samples = np.einsum("sk,fkd->fsd", weights, vertices[tris]).reshape(-1, 3)
-    sample_face = np.repeat(owner, len(weights))
+    side = float(np.median(np.linalg.norm(vertices[tris[:, 1]] - vertices[tris[:, 0]], axis=1)))
+    step = float(np.clip(_spacing(points), side / (4 * SAMPLES_PER_SIDE), side / SAMPLES_PER_SIDE))
+    samples, which = _sample_triangles(vertices, tris, step)
+    sample_face = owner[which]
     _, snap = tree.query(samples, workers=-1)
     _, idx = cKDTree(points[snap]).query(points, workers=-1)
     return sample_face[idx]
@@ -439,9 +437,14 @@ def _graph(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.i
 
 
 def clean_labels(
-    points: NDArray[np.float64], labels: NDArray[np.int64], min_points: int = MIN_PATCH_POINTS
+    points: NDArray[np.float64], labels: NDArray[np.int64], min_points: int = MIN_PATCH_POINTS,
+    regions: NDArray[np.int64] | None = None,
 ) -> NDArray[np.int64]:
     """Labels where every segment is one connected piece of at least ``min_points`` points.
+
+    With ``regions`` (one id per point, e.g. :func:`point_regions`), graph edges between
+    different regions are dropped first: no segment then spans two regions, and pieces
+    only join neighbours in their own region.
 
     1. Connected pieces of each label in the k-NN graph (edges within one label).
     2. Each label keeps its largest piece if that holds ``min_points``; the other pieces
@@ -449,7 +452,16 @@ def clean_labels(
     3. Labels are renumbered 0 .. P-1 in order of their smallest old label.
     """
     lab = labels.copy()
+    if regions is not None:
+        # Stray points of a region (a point's nearest triangle across a crease) join it.
+        regions = clean_labels(points, regions, min_points)
     rows, cols = _graph(points)
+    if regions is not None:
+        keep = regions[rows] == regions[cols]
+        rows, cols = rows[keep], cols[keep]
+        # Split every label by region first (a new label per (label, region) pair).
+        _, lab = np.unique(np.column_stack([lab, regions]), axis=0, return_inverse=True)
+        lab = lab.ravel().astype(np.int64)
     for _ in range(20):
         same = lab[rows] == lab[cols]
         n = len(points)
@@ -502,6 +514,118 @@ def crease_edges(
     normal = _normals(vertices, tri)
     cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
     return edges[cos < np.cos(np.radians(angle))]
+
+
+def crease_regions(
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE
+) -> NDArray[np.int64]:
+    """Smooth region of each triangle: triangles joined across edges that are no crease.
+
+    Returns
+    -------
+    (F,) int
+        Region id per triangle, 0 .. R-1 (a mesh without creases is one region per
+        connected component).
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    _, pair = _edge_faces(tri)
+    normal = _normals(vertices, tri)
+    cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
+    smooth = pair[cos >= np.cos(np.radians(angle))]
+    g = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])), shape=(len(tri),) * 2)
+    _, region = connected_components(g, directed=False)
+    return region.astype(np.int64)
+
+
+def single_patch_regions(
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], region: NDArray[np.int64],
+    max_turn: float = SINGLE_PATCH_TURN,
+) -> NDArray[np.bool_]:
+    """Which smooth regions can be one patch each: a disk that turns little.
+
+    A crease-bounded face of a CAD part (a box side, a prism's cap) is best one patch whose
+    sides are its creases; the coarse quad mesh, which knows nothing of the creases, would
+    cut it into slivers along them. A region qualifies when
+
+    1. it is a topological disk: Euler characteristic V - E + F = 1 over its triangles;
+    2. every triangle normal is within ``max_turn`` deg of the region's area-weighted mean
+       normal (the patch stays a height field over its plane).
+
+    Regions with more than 4 corners are split into 3/4-sided pieces by the pipeline.
+
+    Returns
+    -------
+    (R,) bool
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    n_reg = int(region.max()) + 1
+    cross = np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]], vertices[tri[:, 2]] - vertices[tri[:, 0]])
+    mean = np.zeros((n_reg, 3))
+    np.add.at(mean, region, cross)
+    mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
+    unit = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
+    cos = np.einsum("ij,ij->i", unit, mean[region])
+    worst = np.full(n_reg, 1.0)
+    np.minimum.at(worst, region, cos)
+    n_f = np.bincount(region, minlength=n_reg)
+    edges = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e_reg = np.unique(np.column_stack([edges, np.repeat(region, 3)]), axis=0)
+    n_e = np.bincount(e_reg[:, 2], minlength=n_reg)
+    v_reg = np.unique(np.column_stack([tri.ravel(), np.repeat(region, 3)]), axis=0)
+    n_v = np.bincount(v_reg[:, 1], minlength=n_reg)
+    return ((n_v - n_e + n_f) == 1) & (worst >= np.cos(np.radians(max_turn)))
+
+
+def point_regions(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], triangles: NDArray[np.int64],
+    region: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Region of each point: the region of the mesh triangle nearest to it.
+
+    1. Every triangle is sampled on a barycentric grid about one point spacing fine (so a
+       CAD part's long thin triangles are covered too, :func:`_sample_triangles`).
+    2. The triangles of each point's ``REGION_CANDIDATES`` nearest samples are candidates;
+       the one whose plane is nearest to the point wins (a point on the mesh lies in its
+       own triangle's plane, so near a crease the far face's plane loses).
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    samples, owner = _sample_triangles(vertices, tri, _spacing(points))
+    k = min(REGION_CANDIDATES, len(samples))
+    _, idx = cKDTree(samples).query(points, k=k, workers=-1)
+    cand = owner[np.asarray(idx).reshape(len(points), k)]
+    normal = _normals(vertices, tri)
+    off = np.einsum("nkd,nkd->nk", points[:, None, :] - vertices[tri[cand, 0]], normal[cand])
+    best = cand[np.arange(len(points)), np.abs(off).argmin(axis=1)]
+    return region[best]
+
+
+def _spacing(points: NDArray[np.float64]) -> float:
+    """Median nearest-neighbour distance of a cloud (on a subsample of ~2000 points)."""
+    sub = points[:: max(1, len(points) // 2000)]
+    return float(np.median(cKDTree(points).query(sub, k=2)[0][:, 1]))
+
+
+def _sample_triangles(
+    vertices: NDArray[np.float64], tri: NDArray[np.int64], spacing: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Points on every triangle at most ~``spacing`` apart, and the triangle of each.
+
+    1. Per triangle, ``s`` = its longest side over ``spacing`` (at least 1).
+    2. Triangles grouped by ``s``; each group sampled on the barycentric grid of step 1/s.
+    """
+    corners = vertices[tri]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    steps = np.clip(np.ceil(longest / max(spacing, 1e-300)), 1, 4096).astype(np.int64)
+    out, owner = [], []
+    for s in np.unique(steps):
+        which = np.flatnonzero(steps == s)
+        i, j = np.meshgrid(np.arange(s + 1), np.arange(s + 1))
+        keep = i + j <= s
+        bary = np.stack([i[keep], j[keep]], axis=1) / s
+        weights = np.column_stack([1.0 - bary.sum(axis=1), bary])
+        out.append(np.einsum("sk,fkd->fsd", weights, corners[which]).reshape(-1, 3))
+        owner.append(np.repeat(which, len(weights)))
+    return np.concatenate(out), np.concatenate(owner)
 
 
 def _edge_faces(tri: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
