@@ -9,13 +9,19 @@ This module turns it into labels, with numpy/scipy only:
 1. :func:`quads_of` pairs the remesher's triangles back into quads (it returns each quad as
    two consecutive triangles) and checks that the faces form a manifold;
    :func:`dissolve_doublets` merges the two faces around each valence-2 vertex.
-2. :func:`label_points`: every point takes the face its normal line meets first (the
+2. :func:`best_layout`: of a few remeshes, each relaxed on the surface
+   (:func:`relax_layout`), the one whose worst face corner (:func:`layout_quality`,
+   :func:`corner_angles`) is farthest from 0 and 180 deg.
+3. :func:`label_points`: every point takes the face its normal line meets first (the
    coarse mesh projected onto the surface along the normals).
-3. :func:`clean_labels`: a face that the nearest-face rule splits into several pieces
-   (where the coarse mesh cuts a thin part or lies off a strongly curved one) keeps its
-   largest piece; the smaller pieces join the neighbour label they touch most, so every
-   segment is one connected region as the pipeline requires.
-4. :func:`layout_summary`: patches, sides per patch, corner valences, components and the
+4. Creases of a mesh input: :func:`crease_regions` (triangles joined across non-crease
+   edges), :func:`point_regions` (each point's region), :func:`single_patch_regions`
+   (flat-ish disks that are one patch each).
+5. :func:`clean_labels`: a face that the projection splits into several pieces (where the
+   coarse mesh cuts a thin part or lies off a strongly curved one) keeps its largest piece;
+   the smaller pieces join the neighbour label they touch most, so every segment is one
+   connected region as the pipeline requires; with regions, no segment crosses a crease.
+6. :func:`layout_summary`: patches, sides per patch, corner valences, components and the
    creases of the input (:func:`crease_edges`), for the report.
 """
 
