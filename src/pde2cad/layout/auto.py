@@ -274,8 +274,6 @@ def layout_quality(vertices: NDArray[np.float64], faces: list[tuple[int, ...]]) 
     if not faces:
         return 0.0
     ang, _ = corner_angles(vertices, faces)
-    if np.median(ang) > 180.0:  # faces wound the other way round the normals
-        ang = 360.0 - ang
     return float(max(ang.max(), 180.0 - ang.min()))
 
 
@@ -284,9 +282,10 @@ def corner_angles(vertices: NDArray[np.float64], faces: list[tuple[int, ...]]
     """Each face's angle at each of its corners (degrees, in the corner's tangent plane) and
     the corner's valence (faces around it).
 
-    The tangent plane's normal is the sum of the unit normals of the faces at the vertex;
-    angles are measured from the face's outgoing to its incoming side around that normal,
-    so a face whose corner is reflex (a fold of the layout) reads above 180.
+    The tangent plane's normal is the sum of the unit normals of the faces at the vertex,
+    each signed to agree with the first one there (a remesher's faces need not be wound
+    consistently). The angle is unsigned, 0 .. 180: a reflex corner (a fold of the layout)
+    reads as 360 minus it, still far from a fittable corner's.
 
     Returns
     -------
@@ -297,17 +296,20 @@ def corner_angles(vertices: NDArray[np.float64], faces: list[tuple[int, ...]]
     here = np.concatenate(cyc)
     prev = np.concatenate([np.roll(c, 1) for c in cyc])
     nxt = np.concatenate([np.roll(c, -1) for c in cyc])
-    fn = np.cross(vertices[nxt] - vertices[here], vertices[prev] - vertices[here])
-    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
-    vn = np.zeros_like(vertices)
-    np.add.at(vn, here, fn)
-    n = vn[here] / np.maximum(np.linalg.norm(vn[here], axis=1, keepdims=True), 1e-300)
     a = vertices[nxt] - vertices[here]
     b = vertices[prev] - vertices[here]
+    fn = np.cross(a, b)
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    ref = np.zeros_like(vertices)
+    ref[here[::-1]] = fn[::-1]  # the first corner's normal at each vertex
+    sign = np.where(np.einsum("ij,ij->i", fn, ref[here]) < 0, -1.0, 1.0)
+    vn = np.zeros_like(vertices)
+    np.add.at(vn, here, sign[:, None] * fn)
+    n = vn[here] / np.maximum(np.linalg.norm(vn[here], axis=1, keepdims=True), 1e-300)
     a -= n * np.einsum("ij,ij->i", a, n)[:, None]
     b -= n * np.einsum("ij,ij->i", b, n)[:, None]
-    ang = np.degrees(np.arctan2(np.einsum("ij,ij->i", np.cross(a, b), n),
-                                np.einsum("ij,ij->i", a, b))) % 360.0
+    ang = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1),
+                                np.einsum("ij,ij->i", a, b)))
     valence = np.bincount(here, minlength=len(vertices))[here]
     return ang, valence
 
