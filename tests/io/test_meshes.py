@@ -146,3 +146,17 @@ def test_creases_become_sharp_borders(tmp_path: Path, name: str) -> None:
     reference = trimesh.sample.sample_surface(mesh, 300_000, seed=7)[0]
     back = cKDTree(reference).query(faces)[0]
     assert np.percentile(back, 95) <= 5e-3 * diagonal
+
+
+def test_refined_mesh_splits_long_cad_triangles() -> None:
+    """trimesh's 12-triangle box, refined for ~12 patches: same surface (area, bounds), no
+    edge longer than a patch side / REMESH_EDGES_PER_SIDE, so the remesher finds a layout."""
+    from pde2cad.io.meshes import REMESH_EDGES_PER_SIDE, _refined
+
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    v, f = _refined(np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int64), 12)
+    fine = trimesh.Trimesh(v, f, process=False)
+    assert fine.area == pytest.approx(box.area, rel=1e-12)
+    assert np.allclose(fine.bounds, box.bounds)
+    edges = np.linalg.norm(v[fine.edges[:, 0]] - v[fine.edges[:, 1]], axis=1)
+    assert edges.max() <= np.sqrt(box.area / 12) / REMESH_EDGES_PER_SIDE + 1e-12
