@@ -93,3 +93,70 @@ def test_cli_sphere_mesh_to_a_closed_solid(tmp_path: Path) -> None:
     assert lab.shape[1] == 4 and len(np.unique(lab[:, 3])) == s["n_faces"]
     # Sampled points lie on the sphere of radius 10 (chordal mesh: within 1 %).
     assert np.abs(np.linalg.norm(lab[:, :3], axis=1) - 10.0).max() < 0.1
+
+
+def _sharp_case(name: str):  # type: ignore[no-untyped-def]
+    """trimesh's own primitives with sharp edges: a (1, 2, 3) box turned at random, and a
+    hexagonal prism (its caps have 6 corners, so the pipeline splits them)."""
+    if name == "box":
+        m = trimesh.creation.box((1.0, 2.0, 3.0))
+        m.apply_transform(trimesh.transformations.random_rotation_matrix(
+            np.random.default_rng(3).random(3)))
+        return m, {90.0}
+    # 0: the seams where the pipeline cut a cap, inside a flat face.
+    return trimesh.creation.cylinder(radius=0.8, height=1.1, sections=6), {90.0, 60.0, 0.0}
+
+
+@pytest.mark.parametrize("name", ["box", "prism"])
+def test_creases_become_sharp_borders(tmp_path: Path, name: str) -> None:
+    """No labels, a mesh with sharp edges: every flat face between creases is a patch (or
+    the pipeline's pieces of one), the solid closes with gaps <= 1e-7 D, and every crease
+    keeps its dihedral (median along each edge within 1.5 deg, nowhere off by 8)."""
+    pytest.importorskip("OCP")
+    from pde2cad.io.meshes import reconstruct_auto
+    from pde2cad.occ.continuity import measure
+
+    mesh, dihedrals = _sharp_case(name)
+    path = _off(tmp_path / "part.off", np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    surface = read_surface(path, sample_points=50_000)
+    rec, layout = reconstruct_auto(surface, continuity="c1")
+    diagonal = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    m = measure(rec.shape, 20, profile=True)
+    assert m["valid"] and m["closed"] and m["free_edges"] == 0
+    assert m["max_gap"] <= 1e-7 * diagonal
+    assert layout.summary["patches"] == (6 if name == "box" else 8)
+    sharp = 0
+    for edge in m["edges"]:
+        angles = np.asarray(edge["profile"]["angles_deg"])
+        truth = min(dihedrals, key=lambda d: abs(d - np.median(angles)))
+        assert abs(np.median(angles) - truth) < 1.5
+        assert np.abs(angles - truth).max() < 8.0
+        sharp += truth > 0
+    assert sharp >= (12 if name == "box" else 18)  # every edge of the solid, maybe in pieces
+    # Fit: points to faces, and faces back to the true surface.
+    dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
+                                          axis=1) for p in rec.patches.values()])
+    assert dist.mean() <= 2e-3 * diagonal and np.mean(dist > 0.01 * diagonal) < 0.01
+    g = np.linspace(0.0, 1.0, 30)
+    uu, vv = (a.ravel() for a in np.meshgrid(g, g))
+    faces = np.concatenate([p.evaluate(uu, vv) for p in rec.patches.values()])
+    from scipy.spatial import cKDTree
+
+    # The true surface as 300k samples (~1e-3 D apart: an upper bound of the distance).
+    reference = trimesh.sample.sample_surface(mesh, 300_000, seed=7)[0]
+    back = cKDTree(reference).query(faces)[0]
+    assert np.percentile(back, 95) <= 5e-3 * diagonal
+
+
+def test_refined_mesh_splits_long_cad_triangles() -> None:
+    """trimesh's 12-triangle box, refined for ~12 patches: same surface (area, bounds), no
+    edge longer than a patch side / REMESH_EDGES_PER_SIDE, so the remesher finds a layout."""
+    from pde2cad.io.meshes import REMESH_EDGES_PER_SIDE, _refined
+
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    v, f = _refined(np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int64), 12)
+    fine = trimesh.Trimesh(v, f, process=False)
+    assert fine.area == pytest.approx(box.area, rel=1e-12)
+    assert np.allclose(fine.bounds, box.bounds)
+    edges = np.linalg.norm(v[fine.edges[:, 0]] - v[fine.edges[:, 1]], axis=1)
+    assert edges.max() <= np.sqrt(box.area / 12) / REMESH_EDGES_PER_SIDE + 1e-12

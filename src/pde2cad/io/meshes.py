@@ -10,7 +10,8 @@ reads the files and runs the libraries.
    normals (oriented over a tangent-plane graph) and screened Poisson on a subsample,
    trimmed where Poisson extrapolated far from the points.
 3. :func:`quad_remesh`: Instant Meshes (``pyinstantmeshes``) makes a coarse pure-quad mesh
-   aligned to the curvature and the creases (``crease_angle``).
+   aligned to the curvature and the creases (``crease_angle``); the best of a few, relaxed
+   on the surface, is kept (:func:`pde2cad.layout.auto.best_layout`).
 4. :func:`auto_layout`: 1-3 plus :func:`pde2cad.layout.auto.label_points` /
    :func:`~pde2cad.layout.auto.clean_labels`: one label per point, each a 3- or 4-sided
    patch, for :func:`pde2cad.reconstruct.reconstruct`.
@@ -32,13 +33,18 @@ from pde2cad.layout.auto import (
     CREASE_ANGLE,
     TURN_PER_PATCH,
     AutoLayout,
+    best_layout,
     clean_labels,
     crease_edges,
+    crease_regions,
     curvature_radius,
     dissolve_doublets,
     label_points,
     layout_summary,
+    point_normals,
+    point_regions,
     quads_of,
+    single_patch_regions,
 )
 
 MESH_SUFFIXES = (".off", ".stl", ".obj", ".ply", ".glb", ".gltf")
@@ -51,6 +57,8 @@ MIN_POINTS = 500
 MIN_POINTS_PER_PATCH = 1000
 #: Bounds of the automatic patch count.
 PATCH_RANGE = (12, 400)
+#: Input edges per patch side, at least, that the remesher gets (long edges are split).
+REMESH_EDGES_PER_SIDE = 8
 #: Subsample size for the surface mesh of a cloud (normals, Poisson).
 MESH_SUBSAMPLE = 60_000
 
@@ -256,6 +264,25 @@ def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
     return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
 
 
+def _refined(vertices: NDArray[np.float64], triangles: NDArray[np.int64], patches: int
+             ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The mesh with no edge longer than 1/``REMESH_EDGES_PER_SIDE`` of a patch side.
+
+    Instant Meshes computes its orientation and position fields on the input's vertices; a
+    CAD part's STL (a few hundred long triangles) gives it too few, and it returns nothing
+    (OCCT's ``shape.stl``: 249 vertices) or faces far off the surface (a 12-triangle box:
+    vertices 0.3 inside it). Splitting the long edges (trimesh) fixes both.
+    """
+    import trimesh
+
+    area = float(np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]),
+                                axis=1).sum() / 2)
+    longest = np.sqrt(area / max(patches, 1)) / REMESH_EDGES_PER_SIDE
+    v, f = trimesh.remesh.subdivide_to_size(vertices, triangles, max_edge=longest, max_iter=12)
+    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+
+
 def auto_layout(
     surface: Surface, *, patches: int | None = None, patch_size: float | None = None,
     crease_angle: float = CREASE_ANGLE,
@@ -277,9 +304,21 @@ def auto_layout(
     else:
         vertices, tris = surface.vertices, surface.triangles
     count = patch_count(surface.points, vertices, tris, patches, patch_size, crease_angle)
-    q_vertices, faces = quad_remesh(vertices, tris, count, crease_angle)
-    labels = clean_labels(surface.points, label_points(surface.points, q_vertices, faces))
+    normals = point_normals(surface.points)
+    fine_v, fine_t = _refined(vertices, tris, count)
+    q_vertices, faces, _ = best_layout(
+        surface.points, lambda: quad_remesh(fine_v, fine_t, count, crease_angle), normals=normals)
     creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
+    labels = label_points(surface.points, q_vertices, faces, normals=normals)
+    regions = None
+    if creases is not None and len(creases):
+        # Patches end at the creases: labels split by smooth region, and a flat-ish disk
+        # between creases is one patch.
+        tri_region = crease_regions(vertices, tris, crease_angle)
+        regions = point_regions(surface.points, vertices, tris, tri_region)
+        whole = single_patch_regions(vertices, tris, tri_region)[regions]
+        labels[whole] = len(faces) + regions[whole]
+    labels = clean_labels(surface.points, labels, regions=regions)
     summary = layout_summary(faces, labels, None if creases is None else len(creases))
     return AutoLayout(labels, q_vertices, faces, summary)
 

@@ -9,18 +9,25 @@ This module turns it into labels, with numpy/scipy only:
 1. :func:`quads_of` pairs the remesher's triangles back into quads (it returns each quad as
    two consecutive triangles) and checks that the faces form a manifold;
    :func:`dissolve_doublets` merges the two faces around each valence-2 vertex.
-2. :func:`label_points`: every point takes the face nearest to it (faces densely sampled,
-   one KD-tree query per point).
-3. :func:`clean_labels`: a face that the nearest-face rule splits into several pieces
-   (where the coarse mesh cuts a thin part or lies off a strongly curved one) keeps its
-   largest piece; the smaller pieces join the neighbour label they touch most, so every
-   segment is one connected region as the pipeline requires.
-4. :func:`layout_summary`: patches, sides per patch, corner valences, components and the
+2. :func:`best_layout`: of a few remeshes, each relaxed on the surface
+   (:func:`relax_layout`), the one whose worst face corner (:func:`layout_quality`,
+   :func:`corner_angles`) is farthest from 0 and 180 deg.
+3. :func:`label_points`: every point takes the face its normal line meets first (the
+   coarse mesh projected onto the surface along the normals).
+4. Creases of a mesh input: :func:`crease_regions` (triangles joined across non-crease
+   edges), :func:`point_regions` (each point's region), :func:`single_patch_regions`
+   (flat-ish disks that are one patch each).
+5. :func:`clean_labels`: a face that the projection splits into several pieces (where the
+   coarse mesh cuts a thin part or lies off a strongly curved one) keeps its largest piece;
+   the smaller pieces join the neighbour label they touch most, so every segment is one
+   connected region as the pipeline requires; with regions, no segment crosses a crease.
+6. :func:`layout_summary`: patches, sides per patch, corner valences, components and the
    creases of the input (:func:`crease_edges`), for the report.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +41,24 @@ from pde2cad.errors import InputError
 #: Samples per face side when faces are sampled for the nearest-face rule: a face's samples
 #: lie 1/SAMPLES_PER_SIDE of its side apart, well below a patch's width.
 SAMPLES_PER_SIDE = 8
+#: Coarse triangles (nearest centroids) whose intersection with a point's normal line is
+#: tested: a coarse vertex has at most ~2 x 6 fan triangles around it.
+CANDIDATES = 16
+#: Smoothing passes of the coarse mesh and the fraction of the way to the neighbours'
+#: centroid per pass (:func:`relax_layout`).
+RELAX_ITERATIONS = 10
+RELAX_STEP = 0.5
+#: Coarse meshes tried by :func:`best_layout`, and the :func:`layout_quality` (deg) that
+#: ends the search (clean ellipsoid layouts measured <= 133 after relaxing, folded or
+#: rejected ones >= 141).
+LAYOUT_TRIES = 4
+GOOD_LAYOUT = 136.0
+#: Largest normal turn (deg) of a crease-bounded disk that becomes a single patch.
+SINGLE_PATCH_TURN = 60.0
+#: Nearest triangle samples whose triangles compete for a point in :func:`point_regions`.
+REGION_CANDIDATES = 6
+#: Neighbours whose principal axes give a point's normal.
+NORMAL_NEIGHBOURS = 16
 #: Neighbours per point of the graph that decides connectivity of the labels.
 GRAPH_NEIGHBOURS = 8
 #: Fewest points per patch: the pipeline fits an edge-curve band and a deformation per patch;
@@ -146,6 +171,149 @@ def dissolve_doublets(faces: list[tuple[int, ...]]) -> list[tuple[int, ...]]:
     return out
 
 
+def face_edges(faces: list[tuple[int, ...]]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Undirected edges of a polygon mesh (sorted vertex pairs) and how many faces use each."""
+    ed = np.asarray([(f[j], f[(j + 1) % len(f)]) for f in faces for j in range(len(f))],
+                    dtype=np.int64).reshape(-1, 2)
+    return np.unique(np.sort(ed, axis=1), axis=0, return_counts=True)
+
+
+def relax_layout(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], faces: list[tuple[int, ...]],
+    iterations: int = RELAX_ITERATIONS, step: float = RELAX_STEP,
+    normals: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """The coarse mesh's vertices moved on the surface towards their neighbours' centroid.
+
+    A field-aligned remesher leaves some corners of 3 faces with one face angle near 180 deg
+    (the vertex sits on the line of two of its neighbours, a "T"); the patch there has two
+    near-collinear sides at a corner, its Coons base degenerates and folds (measured on
+    ellipsoid layouts: every folded one had a 3-valent angle of 144-167 deg, the clean ones
+    at most 130). Tangential smoothing turns such T's into Y's and evens the face sizes.
+
+    1. Neighbours from the faces' edges; vertices on an open boundary (edges of one face)
+       stay where they are.
+    2. ``iterations`` times: each free vertex moves ``step`` of the way to its neighbours'
+       centroid, within its tangent plane, then onto the tangent plane of its nearest point
+       (the surface: points with ``normals``, :func:`point_normals` when not given).
+    3. The vertices after the pass with the best :func:`layout_quality` are returned (the
+       input's when no pass improves it: smoothing a curved surface's mesh for long drifts).
+    """
+    verts = np.array(vertices, dtype=np.float64)
+    edges, uses = face_edges(faces)
+    if len(edges) == 0:
+        return verts
+    if normals is None:
+        normals = point_normals(points)
+    fixed = np.zeros(len(verts), dtype=bool)
+    fixed[edges[uses == 1].ravel()] = True
+    both = np.concatenate([edges, edges[:, ::-1]])
+    degree = np.bincount(both[:, 0], minlength=len(verts)).astype(np.float64)
+    used = degree > 0
+    tree = cKDTree(points)
+    best, best_score = verts.copy(), layout_quality(verts, faces)
+    for _ in range(iterations):
+        total = np.zeros_like(verts)
+        np.add.at(total, both[:, 0], verts[both[:, 1]])
+        target = total[used] / degree[used, None]
+        _, near = tree.query(verts[used], workers=-1)
+        n = normals[near]
+        move = step * (target - verts[used])
+        moved = verts[used] + move - n * np.einsum("ij,ij->i", move, n)[:, None]
+        moved -= n * np.einsum("ij,ij->i", moved - points[near], n)[:, None]
+        free = ~fixed[used]
+        verts[np.flatnonzero(used)[free]] = moved[free]
+        score = layout_quality(verts, faces)
+        if score < best_score:
+            best, best_score = verts.copy(), score
+    return best
+
+
+def best_layout(
+    points: NDArray[np.float64],
+    remesh: Callable[[], tuple[NDArray[np.float64], list[tuple[int, ...]]]],
+    tries: int = LAYOUT_TRIES, normals: NDArray[np.float64] | None = None,
+    relax: bool = True,
+) -> tuple[NDArray[np.float64], list[tuple[int, ...]], float]:
+    """The best of a few (randomized) coarse meshes, each relaxed on the surface.
+
+    Remeshing costs a second or two, a reconstruction ten times that; so the layouts are
+    ranked by :func:`layout_quality` before any is fitted.
+
+    1. Up to ``tries`` times: ``remesh()``, then :func:`relax_layout` (if ``relax``).
+    2. Stop at the first whose quality is at most ``GOOD_LAYOUT`` deg; else keep the best.
+
+    Returns
+    -------
+    vertices, faces, quality
+    """
+    if normals is None and relax:
+        normals = point_normals(points)
+    best: tuple[NDArray[np.float64], list[tuple[int, ...]], float] | None = None
+    for _ in range(max(1, tries)):
+        vertices, faces = remesh()
+        if relax:
+            vertices = relax_layout(points, vertices, faces, normals=normals)
+        score = layout_quality(vertices, faces)
+        if best is None or score < best[2]:
+            best = (vertices, faces, score)
+        if score <= GOOD_LAYOUT:
+            break
+    assert best is not None
+    return best
+
+
+def layout_quality(vertices: NDArray[np.float64], faces: list[tuple[int, ...]]) -> float:
+    """How far the worst face corner of a coarse mesh is from a fittable one (degrees).
+
+    ``max(largest corner angle, 180 - smallest)`` (:func:`corner_angles`): a corner near
+    180 deg makes two sides of a patch collinear and its Coons base folds; near 0 the patch
+    is a sliver. Measured on ellipsoid layouts: clean ones at most ~130, folded ones or ones
+    the pipeline rejects (a border without corners) 144 and more.
+    """
+    if not faces:
+        return 0.0
+    ang, _ = corner_angles(vertices, faces)
+    return float(max(ang.max(), 180.0 - ang.min()))
+
+
+def corner_angles(vertices: NDArray[np.float64], faces: list[tuple[int, ...]]
+                  ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Each face's angle at each of its corners (degrees, in the corner's tangent plane) and
+    the corner's valence (faces around it).
+
+    The tangent plane's normal is the sum of the unit normals of the faces at the vertex,
+    each signed to agree with the first one there (a remesher's faces need not be wound
+    consistently). The angle is unsigned, 0 .. 180: a reflex corner (a fold of the layout)
+    reads as 360 minus it, still far from a fittable corner's.
+
+    Returns
+    -------
+    angle, valence : (sum of face sizes,) float and int
+        In the order of the faces' corners.
+    """
+    cyc = [np.asarray(f, dtype=np.int64) for f in faces]
+    here = np.concatenate(cyc)
+    prev = np.concatenate([np.roll(c, 1) for c in cyc])
+    nxt = np.concatenate([np.roll(c, -1) for c in cyc])
+    a = vertices[nxt] - vertices[here]
+    b = vertices[prev] - vertices[here]
+    fn = np.cross(a, b)
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    ref = np.zeros_like(vertices)
+    ref[here[::-1]] = fn[::-1]  # the first corner's normal at each vertex
+    sign = np.where(np.einsum("ij,ij->i", fn, ref[here]) < 0, -1.0, 1.0)
+    vn = np.zeros_like(vertices)
+    np.add.at(vn, here, sign[:, None] * fn)
+    n = vn[here] / np.maximum(np.linalg.norm(vn[here], axis=1, keepdims=True), 1e-300)
+    a -= n * np.einsum("ij,ij->i", a, n)[:, None]
+    b -= n * np.einsum("ij,ij->i", b, n)[:, None]
+    ang = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1),
+                                np.einsum("ij,ij->i", a, b)))
+    valence = np.bincount(here, minlength=len(vertices))[here]
+    return ang, valence
+
+
 def _rotated(cycle: tuple[int, ...], v: int) -> tuple[int, ...]:
     """``cycle`` rotated to start at vertex ``v``."""
     k = cycle.index(v)
@@ -163,30 +331,103 @@ def _fan(faces: list[tuple[int, ...]]) -> tuple[NDArray[np.int64], NDArray[np.in
 
 
 def label_points(
-    points: NDArray[np.float64], vertices: NDArray[np.float64], faces: list[tuple[int, ...]]
+    points: NDArray[np.float64], vertices: NDArray[np.float64], faces: list[tuple[int, ...]],
+    normals: NDArray[np.float64] | None = None,
 ) -> NDArray[np.int64]:
-    """Label of each point: the index of the coarse face whose surface piece holds it.
+    """Label of each point: the coarse face its normal line meets first.
 
-    1. Each face is split into a fan of triangles, each sampled on a barycentric grid with
-       about one step per point spacing (at least ``SAMPLES_PER_SIDE``, at most 4x that).
-    2. Each sample moves to its nearest point: the samples then lie on the surface, so a
-       point's nearest sample is the face over it even where the coarse face cuts a chord
-       through a curved surface (nearest *flat* faces tie around every coarse vertex and
-       edge of a convex shape, which scatters the labels there).
+    Projecting along the surface normal maps the coarse mesh onto the surface one to one
+    where it is smooth: a point's patch is the face below or above it, and the borders
+    between labels are the projections of the coarse edges, which meet at each coarse
+    vertex at the coarse faces' own angles. (A nearest-sample rule instead lets the
+    borders wander by the face's chord height near the corners, measured as 44-59 deg
+    hooks there, and the Coons bases of those patches fold.)
+
+    1. Each point's normal (``normals``, or :func:`point_normals`).
+    2. Each face split into a fan of triangles; per point, the ``CANDIDATES`` triangles
+       with the nearest centroids are intersected with the point's normal line
+       (:func:`_ray_hits`); the hit nearest to the point gives its face.
+    3. Points whose line meets none of them (a coarse mesh far off the surface) take the
+       face of their nearest face sample (:func:`_nearest_sample_labels`).
+    """
+    tris, owner = _fan(faces)
+    normal = point_normals(points) if normals is None else normals
+    centroid = vertices[tris].mean(axis=1)
+    k = min(CANDIDATES, len(tris))
+    _, cand = cKDTree(centroid).query(points, k=k, workers=-1)
+    cand = np.asarray(cand).reshape(len(points), k)
+    t, hit = _ray_hits(points, normal, vertices[tris[cand]])
+    t = np.where(hit, np.abs(t), np.inf)
+    best = np.argmin(t, axis=1)
+    labels = owner[cand[np.arange(len(points)), best]]
+    miss = ~np.isfinite(t[np.arange(len(points)), best])
+    if miss.any():
+        labels[miss] = _nearest_sample_labels(points, vertices, tris, owner)[miss]
+    return labels
+
+
+def point_normals(points: NDArray[np.float64], k: int = NORMAL_NEIGHBOURS) -> NDArray[np.float64]:
+    """Unit normals (unoriented) of a cloud: the least principal axis of each point's
+    ``k`` nearest neighbours."""
+    k = min(k, len(points))
+    _, idx = cKDTree(points).query(points, k=k, workers=-1)
+    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb)
+    _, vec = np.linalg.eigh(cov)
+    return vec[:, :, 0]
+
+
+def _ray_hits(
+    origin: NDArray[np.float64], direction: NDArray[np.float64], tri: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Where the lines ``origin + t direction`` meet triangles (Moeller-Trumbore).
+
+    Parameters
+    ----------
+    origin, direction : (N, 3) float
+    tri : (N, K, 3, 3) float
+        K candidate triangles per line.
+
+    Returns
+    -------
+    t : (N, K) float
+        Line parameter of each hit.
+    hit : (N, K) bool
+        Whether the line meets the triangle (edges included, to 1e-9 relative).
+    """
+    e1 = tri[:, :, 1] - tri[:, :, 0]
+    e2 = tri[:, :, 2] - tri[:, :, 0]
+    d = direction[:, None, :]
+    h = np.cross(d, e2)
+    det = np.einsum("nkd,nkd->nk", e1, h)
+    ok = np.abs(det) > 1e-12 * np.einsum("nkd,nkd->nk", e1, e1)
+    inv = 1.0 / np.where(ok, det, 1.0)
+    s = origin[:, None, :] - tri[:, :, 0]
+    u = inv * np.einsum("nkd,nkd->nk", s, h)
+    q = np.cross(s, e1)
+    v = inv * np.einsum("nkd,nkd->nk", np.broadcast_to(d, q.shape), q)
+    t = inv * np.einsum("nkd,nkd->nk", e2, q)
+    tol = 1e-9
+    return t, ok & (u >= -tol) & (v >= -tol) & (u + v <= 1.0 + tol)
+
+
+def _nearest_sample_labels(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], tris: NDArray[np.int64],
+    owner: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Label of each point by its nearest face sample (the fallback of :func:`label_points`).
+
+    1. Each fan triangle sampled about one point spacing fine (:func:`_sample_triangles`;
+       a median side takes ``SAMPLES_PER_SIDE`` to 4x that steps).
+    2. Each sample moves to its nearest point, so the samples lie on the surface even where
+       the coarse face cuts a chord through it.
     3. One KD-tree query per point gives its nearest sample, whose face is the label.
     """
     tree = cKDTree(points)
-    tris, owner = _fan(faces)
-    side = np.linalg.norm(vertices[tris[:, 1]] - vertices[tris[:, 0]], axis=1)
-    spacing = float(np.median(tree.query(points[:: max(1, len(points) // 2000)], k=2)[0][:, 1]))
-    s = int(np.clip(np.ceil(np.median(side) / max(spacing, 1e-300)), SAMPLES_PER_SIDE,
-                    4 * SAMPLES_PER_SIDE))
-    i, j = np.meshgrid(np.arange(s + 1), np.arange(s + 1))
-    keep = i + j <= s
-    bary = np.stack([i[keep], j[keep]], axis=1) / s
-    weights = np.column_stack([1.0 - bary.sum(axis=1), bary])
-    samples = np.einsum("sk,fkd->fsd", weights, vertices[tris]).reshape(-1, 3)
-    sample_face = np.repeat(owner, len(weights))
+    side = float(np.median(np.linalg.norm(vertices[tris[:, 1]] - vertices[tris[:, 0]], axis=1)))
+    step = float(np.clip(_spacing(points), side / (4 * SAMPLES_PER_SIDE), side / SAMPLES_PER_SIDE))
+    samples, which = _sample_triangles(vertices, tris, step)
+    sample_face = owner[which]
     _, snap = tree.query(samples, workers=-1)
     _, idx = cKDTree(points[snap]).query(points, workers=-1)
     return sample_face[idx]
@@ -204,9 +445,14 @@ def _graph(points: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.i
 
 
 def clean_labels(
-    points: NDArray[np.float64], labels: NDArray[np.int64], min_points: int = MIN_PATCH_POINTS
+    points: NDArray[np.float64], labels: NDArray[np.int64], min_points: int = MIN_PATCH_POINTS,
+    regions: NDArray[np.int64] | None = None,
 ) -> NDArray[np.int64]:
     """Labels where every segment is one connected piece of at least ``min_points`` points.
+
+    With ``regions`` (one id per point, e.g. :func:`point_regions`), graph edges between
+    different regions are dropped first: no segment then spans two regions, and pieces
+    only join neighbours in their own region.
 
     1. Connected pieces of each label in the k-NN graph (edges within one label).
     2. Each label keeps its largest piece if that holds ``min_points``; the other pieces
@@ -214,7 +460,16 @@ def clean_labels(
     3. Labels are renumbered 0 .. P-1 in order of their smallest old label.
     """
     lab = labels.copy()
+    if regions is not None:
+        # Stray points of a region (a point's nearest triangle across a crease) join it.
+        regions = clean_labels(points, regions, min_points)
     rows, cols = _graph(points)
+    if regions is not None:
+        keep = regions[rows] == regions[cols]
+        rows, cols = rows[keep], cols[keep]
+        # Split every label by region first (a new label per (label, region) pair).
+        _, lab = np.unique(np.column_stack([lab, regions]), axis=0, return_inverse=True)
+        lab = lab.ravel().astype(np.int64)
     for _ in range(20):
         same = lab[rows] == lab[cols]
         n = len(points)
@@ -267,6 +522,118 @@ def crease_edges(
     normal = _normals(vertices, tri)
     cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
     return edges[cos < np.cos(np.radians(angle))]
+
+
+def crease_regions(
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE
+) -> NDArray[np.int64]:
+    """Smooth region of each triangle: triangles joined across edges that are no crease.
+
+    Returns
+    -------
+    (F,) int
+        Region id per triangle, 0 .. R-1 (a mesh without creases is one region per
+        connected component).
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    _, pair = _edge_faces(tri)
+    normal = _normals(vertices, tri)
+    cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
+    smooth = pair[cos >= np.cos(np.radians(angle))]
+    g = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])), shape=(len(tri),) * 2)
+    _, region = connected_components(g, directed=False)
+    return region.astype(np.int64)
+
+
+def single_patch_regions(
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], region: NDArray[np.int64],
+    max_turn: float = SINGLE_PATCH_TURN,
+) -> NDArray[np.bool_]:
+    """Which smooth regions can be one patch each: a disk that turns little.
+
+    A crease-bounded face of a CAD part (a box side, a prism's cap) is best one patch whose
+    sides are its creases; the coarse quad mesh, which knows nothing of the creases, would
+    cut it into slivers along them. A region qualifies when
+
+    1. it is a topological disk: Euler characteristic V - E + F = 1 over its triangles;
+    2. every triangle normal is within ``max_turn`` deg of the region's area-weighted mean
+       normal (the patch stays a height field over its plane).
+
+    Regions with more than 4 corners are split into 3/4-sided pieces by the pipeline.
+
+    Returns
+    -------
+    (R,) bool
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    n_reg = int(region.max()) + 1
+    cross = np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]], vertices[tri[:, 2]] - vertices[tri[:, 0]])
+    mean = np.zeros((n_reg, 3))
+    np.add.at(mean, region, cross)
+    mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
+    unit = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-300)
+    cos = np.einsum("ij,ij->i", unit, mean[region])
+    worst = np.full(n_reg, 1.0)
+    np.minimum.at(worst, region, cos)
+    n_f = np.bincount(region, minlength=n_reg)
+    edges = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e_reg = np.unique(np.column_stack([edges, np.repeat(region, 3)]), axis=0)
+    n_e = np.bincount(e_reg[:, 2], minlength=n_reg)
+    v_reg = np.unique(np.column_stack([tri.ravel(), np.repeat(region, 3)]), axis=0)
+    n_v = np.bincount(v_reg[:, 1], minlength=n_reg)
+    return ((n_v - n_e + n_f) == 1) & (worst >= np.cos(np.radians(max_turn)))
+
+
+def point_regions(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], triangles: NDArray[np.int64],
+    region: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Region of each point: the region of the mesh triangle nearest to it.
+
+    1. Every triangle is sampled on a barycentric grid about one point spacing fine (so a
+       CAD part's long thin triangles are covered too, :func:`_sample_triangles`).
+    2. The triangles of each point's ``REGION_CANDIDATES`` nearest samples are candidates;
+       the one whose plane is nearest to the point wins (a point on the mesh lies in its
+       own triangle's plane, so near a crease the far face's plane loses).
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    samples, owner = _sample_triangles(vertices, tri, _spacing(points))
+    k = min(REGION_CANDIDATES, len(samples))
+    _, idx = cKDTree(samples).query(points, k=k, workers=-1)
+    cand = owner[np.asarray(idx).reshape(len(points), k)]
+    normal = _normals(vertices, tri)
+    off = np.einsum("nkd,nkd->nk", points[:, None, :] - vertices[tri[cand, 0]], normal[cand])
+    best = cand[np.arange(len(points)), np.abs(off).argmin(axis=1)]
+    return region[best]
+
+
+def _spacing(points: NDArray[np.float64]) -> float:
+    """Median nearest-neighbour distance of a cloud (on a subsample of ~2000 points)."""
+    sub = points[:: max(1, len(points) // 2000)]
+    return float(np.median(cKDTree(points).query(sub, k=2)[0][:, 1]))
+
+
+def _sample_triangles(
+    vertices: NDArray[np.float64], tri: NDArray[np.int64], spacing: float
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Points on every triangle at most ~``spacing`` apart, and the triangle of each.
+
+    1. Per triangle, ``s`` = its longest side over ``spacing`` (at least 1).
+    2. Triangles grouped by ``s``; each group sampled on the barycentric grid of step 1/s.
+    """
+    corners = vertices[tri]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    steps = np.clip(np.ceil(longest / max(spacing, 1e-300)), 1, 4096).astype(np.int64)
+    out, owner = [], []
+    for s in np.unique(steps):
+        which = np.flatnonzero(steps == s)
+        i, j = np.meshgrid(np.arange(s + 1), np.arange(s + 1))
+        keep = i + j <= s
+        bary = np.stack([i[keep], j[keep]], axis=1) / s
+        weights = np.column_stack([1.0 - bary.sum(axis=1), bary])
+        out.append(np.einsum("sk,fkd->fsd", weights, corners[which]).reshape(-1, 3))
+        owner.append(np.repeat(which, len(weights)))
+    return np.concatenate(out), np.concatenate(owner)
 
 
 def _edge_faces(tri: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -211,8 +211,10 @@ def _directions(
                 path = loop[run[: stop + 1]]
                 arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))]
                 lo = min(int(np.searchsorted(arc, LOOP_FROM * reach)), stop // 4)
-                hi = max(min(int(np.searchsorted(arc, LOOP_TO * reach)), stop // 2), lo + 1)
-                d = path[hi] - path[lo]
+                hi = min(max(min(int(np.searchsorted(arc, LOOP_TO * reach)), stop // 2),
+                             lo + 1), stop)
+                # Two corners on one loop sample (stop 0): the chord is all there is.
+                d = path[hi] - path[lo] if hi > lo else xyz[j] - xyz[i]
             else:
                 d = np.cross(normal, np.cross(xyz[j] - xyz[i], axis))
                 if d @ (xyz[j] - xyz[i]) < 0:
