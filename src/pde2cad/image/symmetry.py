@@ -35,9 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
-from scipy.spatial import cKDTree
 
+from pde2cad.curves.distance import nearest
 from pde2cad.errors import InputError
 
 __all__ = ["Symmetry", "detect_symmetry", "fill_loop", "fundamental_split"]
@@ -449,10 +448,31 @@ def _scan_angles(reg: _Region, max_peaks: int, floor: float) -> tuple[list[float
 
 def _boundary_band(reg: _Region, width: float) -> NDArray[np.float64]:
     """Inside pixel centres within ``width`` px (chessboard) of the outside, subsampled."""
-    depth = ndimage.distance_transform_cdt(reg.padded > 0, metric="chessboard")[1:-1, 1:-1]
-    rows, cols = np.nonzero(reg.mask & (depth <= width))
+    deep = _erode_square(reg.mask, int(np.floor(width)))
+    rows, cols = np.nonzero(reg.mask & ~deep)
     pix = np.column_stack([cols + reg.origin[1] + 0.5, rows + reg.origin[0] + 0.5])
     return _subsample(pix, _SEARCH_PIXELS)
+
+
+def _erode_square(mask: NDArray[np.bool_], r: int) -> NDArray[np.bool_]:
+    """Pixels whose whole (2r+1)^2 square lies in ``mask`` (outside counts as empty).
+
+    Separable: along each axis the AND over a window of L = 2r + 1 is that of two
+    overlapping power-of-two windows, each built by doubling (O(log L) passes).
+    """
+    out = mask
+    for axis in (0, 1):
+        a = np.moveaxis(out, axis, 0)
+        size = a.shape[0]
+        pad = np.zeros((size + 2 * r,) + a.shape[1:], dtype=bool)
+        pad[r : r + size] = a
+        span, acc = 1, pad
+        while 2 * span <= 2 * r + 1:
+            acc = acc[:-span] & acc[span:]  # AND over [i, i + 2 span)
+            span *= 2
+        length = 2 * r + 1
+        out = np.moveaxis(acc[:size] & acc[length - span : length - span + size], 0, axis)
+    return out
 
 
 def _mirrors(reg: _Region, iou_min: float, max_axes: int) -> list[Symmetry]:
@@ -682,7 +702,7 @@ def _mirror_split(p: NDArray[np.float64], sym: Symmetry) -> tuple[int, int]:
         # Raster noise can add crossings; the true two are the loop's fixed points under the
         # mirror (a direction-reversing map of a circle fixes exactly two points), one
         # entering and one leaving the positive side, about half a loop apart.
-        img = cKDTree(p).query(sym.apply(p[cross]))[1]
+        img = nearest(p, sym.apply(p[cross]))[1]
         fix = np.minimum(_cyclic_gap(cross, img, n_pts), _cyclic_gap(img, cross, n_pts))
         half = np.abs(_cyclic_gap(cross[:, None], cross[None, :], n_pts) - n_pts / 2.0)
         score = fix[:, None] + fix[None, :] + half
@@ -706,7 +726,6 @@ def _rotation_split(
                 "the rotation turns against the loop's direction (the loop was reversed after "
                 "detection); use sym.inverse()"
             )
-    tree = cKDTree(p)
     if corners is not None:
         # A corner is a natural curve end; prefer the one whose image lands on another corner.
         img = sym.apply(p[corners])
@@ -715,7 +734,7 @@ def _rotation_split(
     else:
         # Prefer a vertex whose image lands on a vertex (exact for quarter and half turns),
         # then the straightest such vertex, so the joins between mapped parts are smooth.
-        dist = tree.query(sym.apply(p))[0]
+        dist = nearest(p, sym.apply(p))[0]
         w = max(2, n_pts // (8 * k))
         before = p - np.roll(p, w, axis=0)
         after = np.roll(p, -w, axis=0) - p

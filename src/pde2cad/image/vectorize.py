@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pde2cad.curves import bezier
-from pde2cad.curves.distance import points_to_curves
+from pde2cad.curves.distance import nearest, points_to_curves
 from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
@@ -458,15 +458,12 @@ def _fit_run(
 
 def _curves_near_loop(curves: NDArray[np.float64], pts: NDArray[np.float64], tol: float) -> bool:
     """True when samples of every curve lie within ``tol`` of the closed loop polygon."""
-    from scipy.spatial import cKDTree
-
     closed = np.vstack([pts, pts[:1]])
 
     # Dense samples of the polygon edges make a KD-tree query exact to 1/8 px.
     steps = 8
     seg = closed[:-1, None, :] + (np.arange(steps) / steps)[None, :, None] * np.diff(closed, axis=0)[:, None, :]
-    tree = cKDTree(seg.reshape(-1, 2))
     samples = bezier.sample_chain(curves, 24)
-    d, _ = tree.query(samples)
+    d, _ = nearest(seg.reshape(-1, 2), samples)
     # Sample spacing only overestimates the distance, so the test stays conservative.
     return bool(d.max() <= tol)
