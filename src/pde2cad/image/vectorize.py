@@ -36,6 +36,10 @@ _SYMMETRY_MAX_ORDER = 24
 # The symmetry search may take this many times the plain fit's time (plus a floor, s).
 _SYMMETRY_TIME = 5.0
 _SYMMETRY_MIN_S = 0.1
+# Crossing curves at most this many apart in a loop are replaced by the crack polygon
+# between them, in at most this many rounds per loop.
+_PATCH_SPAN = 3
+_PATCH_ROUNDS = 20
 # How many symmetry candidates (best saving first) get a fit of their fundamental part.
 _SYMMETRY_CANDIDATES = 3
 # Loops smaller than this are not worth a symmetry search.
@@ -272,6 +276,12 @@ def _fit_loop(
             if any(is_line):
                 errors = points_to_curves(pts, curves)
                 max_err, mean_err = float(errors.max()), float(errors.mean())
+    curves = _close_gaps(curves)
+    untangled = _untangle(pts, curves, is_line, tol)
+    if untangled is not None:
+        curves, is_line, max_err, mean_err = untangled
+        if len(methods) != len(curves):
+            methods = ["crack"] * len(curves)
     return OutlineLoop(
         curves=curves,
         is_hole=contour.is_hole,
@@ -285,6 +295,83 @@ def _fit_loop(
         fitted_curves=int(fitted),
         is_line=is_line,
     )
+
+
+def _close_gaps(curves: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Make every curve start exactly where the previous one ends.
+
+    ``fit_closed`` can return a loop with a join open by up to half a pixel (5 of 141
+    loops of matplotlib's grace_hopper.jpg thresholded), which no CAD wire accepts. Both
+    ends move to their midpoint, each with its neighbouring control point, so the end
+    tangents keep their directions; the error is measured again afterwards by callers
+    that trim, and the move is at most half the gap.
+    """
+    nxt = np.roll(curves, -1, axis=0)
+    gap = nxt[:, 0] - curves[:, 3]
+    open_ = np.linalg.norm(gap, axis=1) > 1e-9
+    if not open_.any():
+        return curves
+    out = curves.copy()
+    half = 0.5 * gap * open_[:, None]
+    out[:, 2:] += half[:, None, :]
+    idx = (np.arange(len(curves)) + 1) % len(curves)
+    out[idx, :2] -= half[:, None, :]
+    return out
+
+
+def _untangle(
+    pts: NDArray[np.float64], curves: NDArray[np.float64], is_line: list[bool], tol: float,
+) -> tuple[NDArray[np.float64], list[bool], float, float] | None:
+    """Remove the crossings of a loop's curves with each other; None if there are none.
+
+    Steps: 1. trim each crossing of consecutive curves (tiny loops at sharp corners;
+    :func:`pde2cad.image.crossings.trim_corner_crossings` holds the boundary within
+    ``tol`` near the corner); 2. a crossing left (a curve looping on itself, or curves at
+    most :data:`_PATCH_SPAN` apart) has its span of curves replaced by the crack polygon
+    between their ends, as lines (exact; lines from the curve ends to the polygon),
+    repeated while that removes crossings; 3. what still crosses is kept (a face of it
+    may fail: :func:`pde2cad.occ.drawing.drawing_faces` says which).
+    """
+    from pde2cad.image.crossings import find_crossings, trim_corner_crossings
+
+    # Held at the crack edges' midpoints too, with the fitter's safety margin.
+    crack = np.vstack([pts, 0.5 * (pts + np.roll(pts, -1, axis=0))])
+    trimmed, fixed, left = trim_corner_crossings(curves, crack, tol * SAFETY)
+    if fixed + left == 0:
+        return None
+    lines = list(is_line)
+    for _ in range(_PATCH_ROUNDS if left else 0):
+        k = len(trimmed)
+        pairs = [(c.a, c.b) if (c.b - c.a) % k <= k // 2 else (c.b, c.a) for c in find_crossings([trimmed])]
+        spans = [(a, b) for a, b in pairs if (b - a) % k <= _PATCH_SPAN]
+        if not spans:
+            break
+        trimmed, lines = _crack_patch(pts, trimmed, lines, *spans[0])
+    errors = points_to_curves(pts, trimmed)
+    return trimmed, lines, float(errors.max()), float(errors.mean())
+
+
+def _crack_patch(
+    pts: NDArray[np.float64], curves: NDArray[np.float64], is_line: list[bool], first: int, last: int,
+) -> tuple[NDArray[np.float64], list[bool]]:
+    """Curves ``first..last`` (cyclic) replaced by lines along the crack polygon ``pts``."""
+    n = len(pts)
+    k = len(curves)
+    order = (first + np.arange(k)) % k  # rotate so that the span starts the loop
+    curves, is_line = curves[order], [is_line[i] for i in order]
+    span = (last - first) % k + 1
+    a, b = curves[0, 0], curves[span - 1, 3]
+    i0 = int(np.argmin(np.sum((pts - a) ** 2, axis=1)))
+    i1 = int(np.argmin(np.sum((pts - b) ** 2, axis=1)))
+    run = pts[(i0 + np.arange((i1 - i0) % n + 1)) % n]
+    step = np.diff(run, axis=0)
+    turn = np.flatnonzero(np.any(step[1:] != step[:-1], axis=1)) + 1
+    verts = np.vstack([a, run[0], run[turn], run[-1], b])
+    keep = np.r_[True, np.linalg.norm(np.diff(verts, axis=0), axis=1) > 1e-6]
+    verts = verts[keep]
+    p, q = verts[:-1], verts[1:]
+    patch = np.stack([p, p + (q - p) / 3.0, p + 2.0 * (q - p) / 3.0, q], axis=1)
+    return np.concatenate([patch, curves[span:]]), [True] * len(patch) + is_line[span:]
 
 
 def _search_symmetric(
