@@ -35,7 +35,7 @@ _SYMMETRY_IOU = 0.85
 _SYMMETRY_MAX_ORDER = 24
 # The symmetry search may take this many times the plain fit's time (plus a floor, s).
 _SYMMETRY_TIME = 5.0
-_SYMMETRY_MIN_S = 0.1
+_SYMMETRY_MIN_S = 0.5
 # Crossing curves at most this many apart in a loop are replaced by the crack polygon
 # between them, in at most this many rounds per loop.
 _PATCH_SPAN = 3
@@ -344,8 +344,8 @@ def _untangle(
         k = len(trimmed)
         pairs = [(c.a, c.b) if (c.b - c.a) % k <= k // 2 else (c.b, c.a) for c in find_crossings([trimmed])]
         spans = [(a, b) for a, b in pairs if (b - a) % k <= _PATCH_SPAN]
-        if not spans:
-            break
+        if not spans or (spans[0][1] - spans[0][0]) % k + 1 >= k - 1:
+            break  # nothing short to patch, or the patch would be the whole loop
         trimmed, lines = _crack_patch(pts, trimmed, lines, *spans[0])
     errors = points_to_curves(pts, trimmed)
     return trimmed, lines, float(errors.max()), float(errors.mean())
