@@ -330,7 +330,8 @@ def _untangle(
     most :data:`_PATCH_SPAN` apart) has its span of curves replaced by the crack polygon
     between their ends, as lines (exact; lines from the curve ends to the polygon),
     repeated while that removes crossings; 3. what still crosses is kept (a face of it
-    may fail: :func:`pde2cad.occ.drawing.drawing_faces` says which).
+    may fail: :func:`pde2cad.occ.drawing.drawing_faces` says which); 4. if the result is
+    not within ``tol`` of the crack vertices and edge midpoints, the loop stays as fitted.
     """
     from pde2cad.image.crossings import find_crossings, trim_corner_crossings
 
@@ -347,7 +348,10 @@ def _untangle(
         if not spans or (spans[0][1] - spans[0][0]) % k + 1 >= k - 1:
             break  # nothing short to patch, or the patch would be the whole loop
         trimmed, lines = _crack_patch(pts, trimmed, lines, *spans[0])
-    errors = points_to_curves(pts, trimmed)
+    errors = points_to_curves(crack, trimmed)
+    if errors.max() > tol * SAFETY:
+        return None  # never trade accuracy for validity: keep the fit as it was
+    errors = errors[: len(pts)]
     return trimmed, lines, float(errors.max()), float(errors.mean())
 
 
