@@ -40,3 +40,23 @@ def test_fit_pde_surface_through_the_package_on_the_nose_data():
     surf = pde2cad.fit_pde_surface(pts, uv, solution="X4", terms=16)
     assert surf.errors["max"] <= 5.52e-5  # Table 4.2
     assert surf.errors["mean"] <= 2.31e-5
+
+
+def test_vectorize_path_loads_no_scipy(tmp_path):
+    """One small image through the CLI (tracing with holes, corners, symmetry, distances)
+    must not import scipy: its import alone costs 0.3-0.5 s of a 0.5 s budget."""
+    code = (
+        "import sys, numpy as np\n"
+        "from PIL import Image\n"
+        "yy, xx = np.mgrid[0:120, 0:120] + 0.5\n"
+        "r = np.hypot(xx - 60.3, yy - 59.6)\n"
+        "ring = (r < 40 + 8 * np.cos(5 * np.arctan2(yy - 59.6, xx - 60.3))) & (r > 15)\n"
+        f"Image.fromarray(np.where(ring, 0, 255).astype(np.uint8)).save({str(tmp_path / 'r.png')!r})\n"
+        "from pde2cad.cli import main\n"
+        f"assert main(['vectorize', {str(tmp_path / 'r.png')!r}, '-o', {str(tmp_path / 'r.svg')!r}]) == 0\n"
+        "bad = [m for m in sys.modules if m.split('.')[0] == 'scipy']\n"
+        "assert not bad, bad[:5]\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "r.svg").read_text().count("<path") >= 1

@@ -148,3 +148,69 @@ def test_report_lists_loops_errors_and_parameterizations():
     for lp in rep["loop_details"]:
         assert len(lp["parameterizations"]) == lp["curves"]
         assert set(lp["parameterizations"]) <= {"chord", "centripetal", "uniform", "foley", "line"}
+
+
+def _font_glyph(font: str, ch: str, size: int = 120) -> np.ndarray:
+    """A glyph rendered by PIL from a font matplotlib ships (not drawn for this project)."""
+    from pathlib import Path
+
+    matplotlib = pytest.importorskip("matplotlib")
+    from PIL import Image, ImageDraw, ImageFont
+
+    path = Path(matplotlib.__file__).parent / "mpl-data" / "fonts" / "ttf" / font
+    im = Image.new("L", (2 * size, 2 * size), 255)
+    ImageDraw.Draw(im).text((size // 3, size // 6), ch, font=ImageFont.truetype(str(path), size), fill=0)
+    return np.asarray(im) < 128
+
+
+def _assert_exact_mirror(loop) -> None:
+    """A reflection maps the outline onto itself read backwards (to 1e-6 px).
+
+    For each cyclic shift of the reversed curve list, the best reflection (orthogonal
+    Procrustes with determinant -1) is fitted; the best shift must match exactly.
+    """
+    c = loop.curves
+    p = c.reshape(-1, 2)
+    best = np.inf
+    for r in range(len(c)):
+        q = np.roll(c[::-1, ::-1], r, axis=0).reshape(-1, 2)
+        pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
+        u, _, vt = np.linalg.svd(qc.T @ pc)
+        rot = u @ np.diag([1.0, -1.0]) @ vt if np.linalg.det(u @ vt) > 0 else u @ vt
+        best = min(best, float(np.abs(pc @ rot.T - qc).max()))
+    assert best < 1e-6
+
+
+@pytest.mark.parametrize("font,ch", [("DejaVuSans.ttf", "T"), ("DejaVuSerif.ttf", "T"), ("DejaVuSans.ttf", "O")])
+def test_unseen_glyphs_found_mirror_symmetric(font: str, ch: str) -> None:
+    # Regression (issue 11): unseen glyphs came out with "0 symmetric loops". The
+    # mirror halves of a straight edge crossing the axis merge back into one line.
+    mask = _font_glyph(font, ch)
+    with_sym = pde2cad.vectorize(mask, 1.0)
+    without = pde2cad.vectorize(mask, 1.0, symmetry=False)
+    outer = with_sym.loops[0]
+    assert outer.symmetry == "mirror"
+    assert with_sym.n_fitted_curves < without.n_curves
+    assert with_sym.n_curves <= without.n_curves + 1
+    _assert_exact_mirror(outer)
+    err = _errors(mask, with_sym)
+    assert err["max_boundary_to_curve"] <= 1.0
+    assert err["max_curve_to_boundary"] <= 1.05
+
+
+def test_tilted_off_grid_heart_found_mirror_symmetric() -> None:
+    # A heart at 63 degrees about an off-grid centre: no pixel-grid mirror exists, the
+    # two halves are different staircases.
+    y, x = np.mgrid[0:220, 0:220] + 0.5
+    c, s = np.cos(1.1), np.sin(1.1)
+    dx, dy = x - 99.6, y - 111.2
+    u, v = (dx * c + dy * s) / 60.0, -(-dx * s + dy * c) / 60.0
+    mask = (u * u + v * v - 1.0) ** 3 - u * u * v**3 <= 0.0
+    with_sym = pde2cad.vectorize(mask, 1.0)
+    without = pde2cad.vectorize(mask, 1.0, symmetry=False)
+    assert with_sym.loops[0].symmetry == "mirror"
+    assert with_sym.n_fitted_curves < without.n_curves
+    _assert_exact_mirror(with_sym.loops[0])
+    err = _errors(mask, with_sym)
+    assert err["max_boundary_to_curve"] <= 1.0
+    assert err["max_curve_to_boundary"] <= 1.05

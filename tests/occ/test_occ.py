@@ -409,3 +409,39 @@ def test_projection_fallback_matches_the_pcurves() -> None:
             a, na = with_pcurve.sample(float(t), p)
             b, nb = projected.sample(float(t), p)
             assert np.linalg.norm(a - b) < 1e-9 and np.linalg.norm(na - nb) < 1e-7
+
+
+@pytest.mark.parametrize("source", ["noisy_blob", "logo2"])
+def test_faces_of_photo_outlines_are_valid(source: str) -> None:
+    # Regression (issue 11): neighbouring curves crossed before sharp corners and
+    # Drawing.to_build123d raised ExportError on these images.
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    import pde2cad
+    from pde2cad.image.raster import read_image, to_mask
+    from pde2cad.occ.drawing import drawing_faces
+
+    if source == "noisy_blob":
+        mask = read_image(Path(__file__).resolve().parents[2] / "examples" / "images" / "noisy_blob.png")
+    else:
+        matplotlib = pytest.importorskip("matplotlib")
+        from PIL import Image
+
+        path = Path(matplotlib.__file__).parent / "mpl-data" / "sample_data" / "logo2.png"
+        mask = to_mask(np.asarray(Image.open(path).convert("L")))
+    drawing = pde2cad.vectorize(mask, 1.0)
+    faces = drawing_faces(drawing)
+    assert len(faces) == len(drawing.shapes())
+    total = 0.0
+    for face in faces:
+        assert BRepCheck_Analyzer(face).IsValid()
+        props = GProp_GProps()
+        BRepGProp.SurfaceProperties_s(face, props)
+        total += abs(props.Mass())
+    # The faces cover the shapes' pixels up to the tolerance band along the boundary
+    # (1 px times its length) and the dropped specks (at most 2 px each).
+    pad = np.pad(mask, 1)
+    cracks = np.count_nonzero(pad[1:] != pad[:-1]) + np.count_nonzero(pad[:, 1:] != pad[:, :-1])
+    assert abs(total - mask.sum()) <= 1.0 * cracks + 2 * drawing.specks

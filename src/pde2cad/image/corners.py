@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import maximum_filter1d
 
 # Defaults: turning at least 50 degrees at scale k = 4 px, concentrated (>= 0.7 of the
 # turning at 2k). Pixel noise turns at most 2*atan(1/4) = 28 degrees at k = 4.
@@ -61,7 +60,7 @@ def detect_corners(
     # Non-maximum suppression over +-k (cyclic); prefer the sharpest fine-scale turn.
     fine = turning_angle(points, max(1, k // 2))
     score = theta + 1e-3 * fine
-    local_max = score >= maximum_filter1d(score, size=2 * k + 1, mode="wrap")
+    local_max = score >= _cyclic_max(score, k)
     idx = np.flatnonzero(candidate & local_max)
     if len(idx) > 1:
         # Plateaus give neighbouring equal maxima: keep the first of each run within k.
@@ -71,3 +70,12 @@ def detect_corners(
             keep[0] = False if keep[1:].any() else True
         idx = idx[keep]
     return idx.astype(np.int64)
+
+
+def _cyclic_max(values: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+    """Maximum over the cyclic window ``i - k .. i + k`` at every index (k is small)."""
+    out = values.copy()
+    for shift in range(1, k + 1):
+        np.maximum(out, np.roll(values, shift), out=out)
+        np.maximum(out, np.roll(values, -shift), out=out)
+    return out

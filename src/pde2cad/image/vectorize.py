@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pde2cad.curves import bezier
-from pde2cad.curves.distance import points_to_curves
+from pde2cad.curves.distance import nearest, points_to_curves
 from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
@@ -29,6 +29,17 @@ from pde2cad.image.raster import read_image, to_mask
 
 # A symmetric outline may be this many curves longer than the plain fit of the loop.
 _SYMMETRY_GROWTH = 1
+# Symmetry detection: a coarse IoU screen, then the boundary test within the tolerance;
+# rotation orders up to this (gears have many teeth).
+_SYMMETRY_IOU = 0.85
+_SYMMETRY_MAX_ORDER = 24
+# The symmetry search may take this many times the plain fit's time (plus a floor, s).
+_SYMMETRY_TIME = 5.0
+_SYMMETRY_MIN_S = 0.5
+# Crossing curves at most this many apart in a loop are replaced by the crack polygon
+# between them, in at most this many rounds per loop.
+_PATCH_SPAN = 3
+_PATCH_ROUNDS = 20
 # How many symmetry candidates (best saving first) get a fit of their fundamental part.
 _SYMMETRY_CANDIDATES = 3
 # Loops smaller than this are not worth a symmetry search.
@@ -249,20 +260,28 @@ def _fit_loop(
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
+    begun = time.perf_counter()
     chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    plain_s = time.perf_counter() - begun
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
     is_line = list(chain.lines) or [False] * len(curves)
     sym_name = None
     fitted = len(curves)
     if symmetry and len(pts) >= _SYMMETRY_MIN_POINTS and len(curves) > 1:
-        found = _fit_symmetric(pts, corners, tol, g1, method, len(curves))
+        found = _search_symmetric(pts, corners, tol, g1, method, len(curves), plain_s, deadline)
         if found is not None:
             curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
             curves, is_line = _flag_lines(curves, tol * SAFETY - max_err)
             if any(is_line):
                 errors = points_to_curves(pts, curves)
                 max_err, mean_err = float(errors.max()), float(errors.mean())
+    curves = _close_gaps(curves)
+    untangled = _untangle(pts, curves, is_line, tol)
+    if untangled is not None:
+        curves, is_line, max_err, mean_err = untangled
+        if len(methods) != len(curves):
+            methods = ["crack"] * len(curves)
     return OutlineLoop(
         curves=curves,
         is_hole=contour.is_hole,
@@ -278,8 +297,107 @@ def _fit_loop(
     )
 
 
+def _close_gaps(curves: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Make every curve start exactly where the previous one ends.
+
+    ``fit_closed`` can return a loop with a join open by up to half a pixel (5 of 141
+    loops of matplotlib's grace_hopper.jpg thresholded), which no CAD wire accepts. Both
+    ends move to their midpoint, each with its neighbouring control point, so the end
+    tangents keep their directions; the error is measured again afterwards by callers
+    that trim, and the move is at most half the gap.
+    """
+    nxt = np.roll(curves, -1, axis=0)
+    gap = nxt[:, 0] - curves[:, 3]
+    open_ = np.linalg.norm(gap, axis=1) > 1e-9
+    if not open_.any():
+        return curves
+    out = curves.copy()
+    half = 0.5 * gap * open_[:, None]
+    out[:, 2:] += half[:, None, :]
+    idx = (np.arange(len(curves)) + 1) % len(curves)
+    out[idx, :2] -= half[:, None, :]
+    return out
+
+
+def _untangle(
+    pts: NDArray[np.float64], curves: NDArray[np.float64], is_line: list[bool], tol: float,
+) -> tuple[NDArray[np.float64], list[bool], float, float] | None:
+    """Remove the crossings of a loop's curves with each other; None if there are none.
+
+    Steps: 1. trim each crossing of consecutive curves (tiny loops at sharp corners;
+    :func:`pde2cad.image.crossings.trim_corner_crossings` holds the boundary within
+    ``tol`` near the corner); 2. a crossing left (a curve looping on itself, or curves at
+    most :data:`_PATCH_SPAN` apart) has its span of curves replaced by the crack polygon
+    between their ends, as lines (exact; lines from the curve ends to the polygon),
+    repeated while that removes crossings; 3. what still crosses is kept (a face of it
+    may fail: :func:`pde2cad.occ.drawing.drawing_faces` says which); 4. if the result is
+    not within ``tol`` of the crack vertices and edge midpoints, the loop stays as fitted.
+    """
+    from pde2cad.image.crossings import find_crossings, trim_corner_crossings
+
+    # Held at the crack edges' midpoints too, with the fitter's safety margin.
+    crack = np.vstack([pts, 0.5 * (pts + np.roll(pts, -1, axis=0))])
+    trimmed, fixed, left = trim_corner_crossings(curves, crack, tol * SAFETY)
+    if fixed + left == 0:
+        return None
+    lines = list(is_line)
+    for _ in range(_PATCH_ROUNDS if left else 0):
+        k = len(trimmed)
+        pairs = [(c.a, c.b) if (c.b - c.a) % k <= k // 2 else (c.b, c.a) for c in find_crossings([trimmed])]
+        spans = [(a, b) for a, b in pairs if (b - a) % k <= _PATCH_SPAN]
+        if not spans or (spans[0][1] - spans[0][0]) % k + 1 >= k - 1:
+            break  # nothing short to patch, or the patch would be the whole loop
+        trimmed, lines = _crack_patch(pts, trimmed, lines, *spans[0])
+    errors = points_to_curves(crack, trimmed)
+    if errors.max() > tol * SAFETY:
+        return None  # never trade accuracy for validity: keep the fit as it was
+    errors = errors[: len(pts)]
+    return trimmed, lines, float(errors.max()), float(errors.mean())
+
+
+def _crack_patch(
+    pts: NDArray[np.float64], curves: NDArray[np.float64], is_line: list[bool], first: int, last: int,
+) -> tuple[NDArray[np.float64], list[bool]]:
+    """Curves ``first..last`` (cyclic) replaced by lines along the crack polygon ``pts``."""
+    n = len(pts)
+    k = len(curves)
+    order = (first + np.arange(k)) % k  # rotate so that the span starts the loop
+    curves, is_line = curves[order], [is_line[i] for i in order]
+    span = (last - first) % k + 1
+    a, b = curves[0, 0], curves[span - 1, 3]
+    i0 = int(np.argmin(np.sum((pts - a) ** 2, axis=1)))
+    i1 = int(np.argmin(np.sum((pts - b) ** 2, axis=1)))
+    run = pts[(i0 + np.arange((i1 - i0) % n + 1)) % n]
+    step = np.diff(run, axis=0)
+    turn = np.flatnonzero(np.any(step[1:] != step[:-1], axis=1)) + 1
+    verts = np.vstack([a, run[0], run[turn], run[-1], b])
+    keep = np.r_[True, np.linalg.norm(np.diff(verts, axis=0), axis=1) > 1e-6]
+    verts = verts[keep]
+    p, q = verts[:-1], verts[1:]
+    patch = np.stack([p, p + (q - p) / 3.0, p + 2.0 * (q - p) / 3.0, q], axis=1)
+    return np.concatenate([patch, curves[span:]]), [True] * len(patch) + is_line[span:]
+
+
+def _search_symmetric(
+    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str,
+    plain: int, plain_s: float, deadline: float | None,
+) -> tuple | None:
+    """:func:`_fit_symmetric`, its part fits within :data:`_SYMMETRY_TIME` times the plain fit's.
+
+    The time ratio, not an absolute limit, bounds the search: a loaded machine slows both
+    fits alike. Past the caller's own ``deadline`` the error propagates.
+    """
+    try:
+        return _fit_symmetric(pts, corners, tol, g1, method, plain, plain_s, deadline)
+    except DeadlineExceeded:
+        if deadline is not None and time.perf_counter() > deadline:
+            raise
+        return None
+
+
 def _fit_symmetric(
-    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str, plain: int
+    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str, plain: int,
+    plain_s: float = np.inf, deadline: float | None = None,
 ) -> tuple | None:
     """Fit the fundamental part of the best symmetry that saves curves; None if none does.
 
@@ -289,19 +407,26 @@ def _fit_symmetric(
     most one curve over the plain one (an exactly symmetric outline is worth that much to a
     user who edits it) and stays within the tolerance of the real boundary everywhere.
     """
-    from pde2cad.image.symmetry import detect_symmetry, fundamental_split
+    from pde2cad.image.symmetry import boundary_gap, detect_symmetry, fundamental_split
 
     best = None
     # Candidates come best saving first; the first one that passes is kept, and only the
     # first few are tried (each costs a fit of its fundamental part).
-    for sym in detect_symmetry(pts, corners=corners)[:_SYMMETRY_CANDIDATES]:
-        if best is not None:
-            break
+    limit = 2.0 * tol * SAFETY + 0.5  # two staircases within tol of one curve
+    tries = 0
+    found = detect_symmetry(pts, corners=corners, iou_min=_SYMMETRY_IOU, max_order=_SYMMETRY_MAX_ORDER)
+    if np.isfinite(plain_s):
+        local = time.perf_counter() + _SYMMETRY_TIME * plain_s + _SYMMETRY_MIN_S
+        deadline = local if deadline is None else min(local, deadline)
+    for sym in found:
         copies = 2 if sym.kind == "mirror" else sym.order
-        if plain < copies:
+        if best is not None or tries == _SYMMETRY_CANDIDATES:
+            break
+        if plain < copies or boundary_gap(pts, sym) > limit:
             continue
+        tries += 1
         i0, i1 = fundamental_split(pts, sym, corners=corners)
-        part = _fit_part(pts, corners, sym, i0, i1, tol, g1, method, plain)
+        part = _fit_part(pts, corners, sym, i0, i1, tol, g1, method, plain, deadline)
         if part is None:
             continue
         chain, full, part_corners = part
@@ -315,7 +440,8 @@ def _fit_symmetric(
     return best
 
 
-def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method: str, plain: int):
+def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method: str, plain: int,
+              deadline: float | None = None):
     """Fit the run i0..i1 with exact end points on the symmetry and map it around."""
     n = len(pts)
     length = (i1 - i0) % n
@@ -343,16 +469,19 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     local = np.sort(((corners - i0) % n)[((corners - i0) % n) <= length]) if corners.size else np.arange(0)
     local = local[(local > 2) & (local < length - 2)]
     merged, cuts, copies = _pooled_run(pts, sym, i0, i1, run, local)
-    budget = (plain + _SYMMETRY_GROWTH) // copies  # past this the outline grows too much
+    # Past this the outline grows too much (each junction may still merge two lines).
+    budget = (plain + _SYMMETRY_GROWTH + copies) // copies
     cut_points = [tips[int((i0 + c) % n)] for c in local] if len(cuts) == len(local) else None
-    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget, cut_points)
+    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
+                     cut_points, deadline)
     if chain is None and (cut_points or (c_start and sym.kind != "mirror")):
         # Sharpened tips come from this part's own raster; the other parts' rasters can
         # disagree (non-grid rotations), so retry on the corner points themselves.
         if sym.kind != "mirror" and c_start:
             p_start = run[0]
             p_end = sym.apply(p_start)
-        chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget)
+        chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
+                         None, deadline)
     if chain is None:
         return None
     if sym.kind == "mirror":
@@ -363,8 +492,43 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
         for _ in range(sym.order - 1):
             copies.append(sym.apply(copies[-1]))
         full = np.concatenate(copies)
+    full = _merge_junction_lines(full, len(chain.curves), 0.25 * tol)
     part_corners = len(local) + (1 if c_start else 0)
     return chain, full, part_corners
+
+
+def _merge_junction_lines(full: NDArray[np.float64], m: int, slack: float) -> NDArray[np.float64]:
+    """Join the two straight curves that meet at every junction between mapped parts.
+
+    A straight edge crossing a mirror axis (the bar of an H) is fitted as two halves;
+    when both curves at every junction lie within ``slack`` of the chord from the first's
+    start to the second's end, each pair becomes one straight cubic. All junctions are
+    congruent, so either all merge (the outline stays exactly symmetric) or none.
+
+    Parameters
+    ----------
+    full : (K, 4, 2) float
+        The closed outline, parts of ``m`` curves each.
+    """
+    k = len(full) // m
+    if k < 2 or m < 2:
+        return full
+    ends = np.arange(1, k + 1) * m - 1  # last curve of each part
+    nxt = (ends + 1) % len(full)
+    a, b = full[ends, 0], full[nxt, 3]
+    d = b - a
+    length2 = np.maximum(np.sum(d * d, axis=1), 1e-24)[:, None]
+    ctrl = np.concatenate([full[ends], full[nxt]], axis=1)  # (k, 8, 2)
+    t = np.clip(np.sum((ctrl - a[:, None]) * d[:, None], axis=2) / length2, 0.0, 1.0)
+    dev = np.linalg.norm(ctrl - (a[:, None] + t[..., None] * d[:, None]), axis=2).max(axis=1)
+    if dev.max() > slack:
+        return full
+    line = np.stack([a, a + d / 3.0, a + 2.0 * d / 3.0, b], axis=1)
+    out = full.copy()
+    out[ends] = line
+    keep = np.ones(len(full), bool)
+    keep[nxt] = False
+    return out[keep]
 
 
 def _pooled_run(pts, sym, i0: int, i1: int, run, local):
@@ -399,13 +563,12 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
             for _ in range(j):
                 seg = inverse.apply(seg)
             parts.append(seg)
-    params, owner, index = [], [], []
+    params, owner = [], []
     for j, part in enumerate(parts):
         step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
         arc = np.r_[0.0, np.cumsum(step)]
         params.append(arc / max(arc[-1], 1e-12))
         owner.append(np.full(len(part), j))
-        index.append(np.arange(len(part)))
     s = np.concatenate(params)
     own = np.concatenate(owner)
     order = np.lexsort((own, s))
@@ -426,7 +589,7 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
 
 def _fit_run(
     run, local_corners, tol, p_start, p_end, t_start, t_end, g1, method, copies=1, budget=None,
-    cut_points=None,
+    cut_points=None, deadline: float | None = None,
 ) -> ChainFit | None:
     """Fit an open run split at its corners, with given end points and end tangents; None
     when some piece cannot meet the tolerance (the symmetry is then not worth it).
@@ -447,6 +610,7 @@ def _fit_run(
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
             max_pieces=None if budget is None else budget - len(fits), edge_midpoints=True,
+            deadline=deadline,
         )
         if not chain.ok:
             return None
@@ -458,15 +622,12 @@ def _fit_run(
 
 def _curves_near_loop(curves: NDArray[np.float64], pts: NDArray[np.float64], tol: float) -> bool:
     """True when samples of every curve lie within ``tol`` of the closed loop polygon."""
-    from scipy.spatial import cKDTree
-
     closed = np.vstack([pts, pts[:1]])
 
     # Dense samples of the polygon edges make a KD-tree query exact to 1/8 px.
     steps = 8
     seg = closed[:-1, None, :] + (np.arange(steps) / steps)[None, :, None] * np.diff(closed, axis=0)[:, None, :]
-    tree = cKDTree(seg.reshape(-1, 2))
     samples = bezier.sample_chain(curves, 24)
-    d, _ = tree.query(samples)
+    d, _ = nearest(seg.reshape(-1, 2), samples)
     # Sample spacing only overestimates the distance, so the test stays conservative.
     return bool(d.max() <= tol)
