@@ -457,7 +457,8 @@ def _fit_auto(job: ReconstructJob, message: Message, progress: Progress | None,
     kwargs = reconstruct_kwargs(reconstruct, job, progress)
     with _stage("reconstruct", timings):
         rec, layout = reconstruct_auto(surface, patches=job.patches, patch_size=job.patch_size,
-                                       crease_angle=job.crease_angle, **kwargs)
+                                       crease_angle=job.crease_angle, message=message,
+                                       **kwargs)
     info = {"file": str(job.cloud), "points": len(surface.points),
             "points_used": len(surface.points), "labels_from": "auto layout"}
     return rec, surface, layout, info
