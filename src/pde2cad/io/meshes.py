@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import sys
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,6 +54,10 @@ MIN_POINTS = 500
 MIN_POINTS_PER_PATCH = 1000
 #: Bounds of the automatic patch count.
 PATCH_RANGE = (12, 400)
+#: Most points laid out and fitted; larger clouds are fitted on a random subsample of this
+#: many (patches of 400+ points at the largest patch count; the projections, edge bands
+#: and per-patch solves grow with the points, their accuracy hardly does).
+FIT_POINTS = 150_000
 #: Points the guide mesh of a cloud is built from (normals, orientation, Poisson).
 GUIDE_POINTS = 20_000
 
@@ -344,9 +349,14 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`, up to ``ATTEMPTS``
     layouts.
 
-    1. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
-    2. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
-    3. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
+    1. A cloud of more than ``FIT_POINTS`` points is laid out and fitted on a random
+       subsample of that many (the layout and fit cost grows with the points, their
+       accuracy hardly: patches of 500+ points each); at the end every input point takes
+       the label of its nearest subsample point (one KD-tree query), so ``layout.labels``
+       has one label per input point.
+    2. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
+    3. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
+    4. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
        folded at a corner) is remeshed too; the result with the smallest such angle is kept.
 
     Returns
@@ -357,6 +367,12 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     from pde2cad.reconstruct import reconstruct
 
     say = message or (lambda text: None)
+    full = surface
+    if len(surface.points) > FIT_POINTS:
+        pick = np.sort(np.random.default_rng(0).choice(len(surface.points), FIT_POINTS,
+                                                       replace=False))
+        surface = dataclasses.replace(surface, points=surface.points[pick])
+        say(f"fitting a random {FIT_POINTS} of the {len(full.points)} points")
     if surface.triangles is None:
         say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")
     guide = guide_mesh(surface)
@@ -373,7 +389,7 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
             say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
         if layout.summary.get("creases"):
-            return rec, layout
+            return rec, _all_points(layout, surface, full)
         angle = _fold_angle(rec)
         if best is None or angle < best[0]:
             best = (angle, rec, layout)
@@ -382,4 +398,14 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
         if attempt < ATTEMPTS - 1:
             say(f"layout {attempt + 1} folds (seam angle {angle:.0f} deg); remeshing")
     assert best is not None
-    return best[1], best[2]
+    return best[1], _all_points(best[2], surface, full)
+
+
+def _all_points(layout: AutoLayout, fitted: Surface, full: Surface) -> AutoLayout:
+    """``layout`` with a label for every point of ``full`` (nearest fitted point's)."""
+    if fitted is full:
+        return layout
+    from scipy.spatial import cKDTree
+
+    _, nearest = cKDTree(fitted.points).query(full.points, workers=-1)
+    return dataclasses.replace(layout, labels=layout.labels[nearest])
