@@ -369,13 +369,18 @@ def _solids(shells: list[Any]) -> TopoDS_Shape | None:
         for j in voids:
             maker.Add(TopoDS.Shell_s(_subshapes(alone[j], TopAbs_SHELL)[0].Reversed()))
         bodies.append(maker.Solid())
-    if len(bodies) == 1:
-        return bodies[0]
+    return _compound(bodies)
+
+
+def _compound(parts: list[TopoDS_Shape]) -> TopoDS_Shape:
+    """One shape alone, several as a compound."""
+    if len(parts) == 1:
+        return parts[0]
     compound = TopoDS_Compound()
     builder = BRep_Builder()
     builder.MakeCompound(compound)
-    for body in bodies:
-        builder.Add(compound, body)
+    for part in parts:
+        builder.Add(compound, part)
     return compound
 
 
@@ -617,15 +622,7 @@ def as_topods(obj: object) -> TopoDS_Shape:
     if callable(vals):  # CadQuery Workplane
         return as_topods(list(vals()))
     if isinstance(obj, (list, tuple)) and obj:
-        parts = [as_topods(o) for o in obj]
-        if len(parts) == 1:
-            return parts[0]
-        compound = TopoDS_Compound()
-        builder = BRep_Builder()
-        builder.MakeCompound(compound)
-        for part in parts:
-            builder.Add(compound, part)
-        return compound
+        return _compound([as_topods(o) for o in obj])
     raise InputError(
         f"cannot export a {type(obj).__name__}: give a TopoDS_Shape, a build123d or CadQuery "
         "shape, a Workplane, a list of shapes, or a reconstruction result"
