@@ -239,7 +239,11 @@ def quad_remesh(
 
     Pure-quad mode subdivides every face of the quad-dominant result into quads, so the
     remesher is asked for a quarter of the faces. Its deterministic mode returns nothing on
-    some inputs (a torus), so it is not used; an empty result is retried with 1.5x faces.
+    some inputs (a torus), so it is not used. It also returns nothing, at any face count
+    tried (6-14), on some Poisson meshes (a noisy, unevenly dense sphere scan's, 82k
+    triangles), and gives a layout on the same mesh decimated to half its triangles; so an
+    empty result is retried on the mesh decimated by half (open3d quadric decimation) and
+    with 1.5x faces.
     """
     try:
         import pyinstantmeshes as pim
@@ -251,16 +255,28 @@ def quad_remesh(
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(triangles, dtype=np.int32)
     target = max(2, int(round(patches / 4)))
-    for _ in range(3):
+    for _ in range(REMESH_TRIES):
         out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
                                    crease_angle=float(crease_angle), pure_quad=True)
         if len(out_f):
             return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
         target = int(target * 1.5) + 1
+        v, f = _decimated(v, f)
     raise InputError(
         "the quad remesher found no layout for this surface; pass labels (--labels) or try "
         "another --patches count"
     )
+
+
+def _decimated(v: NDArray[np.float32], f: NDArray[np.int32]) -> tuple[Any, Any]:
+    """The mesh with half its triangles (open3d quadric decimation), as the remesher's arrays."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v.astype(np.float64)),
+                                     o3d.utility.Vector3iVector(f.astype(np.int32)))
+    half = mesh.simplify_quadric_decimation(max(100, len(f) // 2))
+    return (np.ascontiguousarray(np.asarray(half.vertices), dtype=np.float32),
+            np.ascontiguousarray(np.asarray(half.triangles), dtype=np.int32))
 
 
 def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
@@ -326,6 +342,9 @@ def auto_layout(
     return AutoLayout(labels, q_vertices, faces, summary)
 
 
+#: Remesher runs per layout before giving up (each asks for 1.5x the faces of the last).
+REMESH_TRIES = 5
+
 #: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
 #: face the pipeline reads with a spurious corner, or a face that folds at a corner).
 ATTEMPTS = 3
@@ -355,7 +374,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
        the label of its nearest subsample point (one KD-tree query), so ``layout.labels``
        has one label per input point.
     2. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
-    3. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
+    3. A layout the pipeline rejects (a segment with other than 3 or 4 corners, or one whose
+       points fall apart in the pipeline's neighbour graph, seen on a scan with 4x density
+       changes) is remeshed.
     4. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
        folded at a corner) is remeshed too; the result with the smallest such angle is kept.
 
@@ -384,7 +405,8 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
         try:
             rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
         except InputError as exc:
-            if "corners" not in str(exc) or (attempt == ATTEMPTS - 1 and best is None):
+            retry = "corners" in str(exc) or "falls apart" in str(exc)
+            if not retry or (attempt == ATTEMPTS - 1 and best is None):
                 raise InputError(f"the automatic layout failed: {exc}") from exc
             say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
