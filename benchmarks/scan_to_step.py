@@ -97,14 +97,13 @@ def _ours(path: Path, reference: np.ndarray, diagonal: float, continuity: str) -
 
     from pde2cad.io.meshes import read_surface, reconstruct_auto
     from pde2cad.occ import write_step
+    from pde2cad.occ.build import quiet_messages
     from pde2cad.report import build_report
 
-    from pde2cad.cli import _quiet_occt
-
-    _quiet_occt()
     t0 = time.perf_counter()
     surface = read_surface(path, sample_points=SAMPLES)
-    rec, layout = reconstruct_auto(surface, continuity=continuity)
+    with quiet_messages():
+        rec, layout = reconstruct_auto(surface, continuity=continuity)
     step = path.with_suffix(".step")
     write_step(rec.shape, step)
     elapsed = time.perf_counter() - t0

@@ -444,7 +444,7 @@ def _fit_auto(job: ReconstructJob, message: Message, progress: Progress | None,
               timings: dict[str, float]) -> tuple[Any, Any, Any, dict[str, Any]]:
     """Steps 2-3 without labels: read the mesh or cloud, lay it out, reconstruct."""
     from pde2cad.io.clouds import check_cloud_suffix
-    from pde2cad.io.meshes import read_surface, reconstruct_auto
+    from pde2cad.io.meshes import FIT_POINTS, read_surface, reconstruct_auto
     from pde2cad.reconstruct import reconstruct
 
     path = Path(job.cloud)
@@ -457,9 +457,10 @@ def _fit_auto(job: ReconstructJob, message: Message, progress: Progress | None,
     kwargs = reconstruct_kwargs(reconstruct, job, progress)
     with _stage("reconstruct", timings):
         rec, layout = reconstruct_auto(surface, patches=job.patches, patch_size=job.patch_size,
-                                       crease_angle=job.crease_angle, **kwargs)
+                                       crease_angle=job.crease_angle, message=message,
+                                       **kwargs)
     info = {"file": str(job.cloud), "points": len(surface.points),
-            "points_used": len(surface.points), "labels_from": "auto layout"}
+            "points_used": min(len(surface.points), FIT_POINTS), "labels_from": "auto layout"}
     return rec, surface, layout, info
 
 

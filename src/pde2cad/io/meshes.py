@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import os
 import sys
+import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,13 +33,13 @@ from numpy.typing import NDArray
 from pde2cad.errors import InputError
 from pde2cad.layout.auto import (
     CREASE_ANGLE,
+    CURVATURE_PERCENTILE,
     TURN_PER_PATCH,
     AutoLayout,
     best_layout,
     clean_labels,
     crease_edges,
     crease_regions,
-    curvature_radius,
     dissolve_doublets,
     label_points,
     layout_summary,
@@ -46,6 +48,7 @@ from pde2cad.layout.auto import (
     quads_of,
     single_patch_regions,
 )
+from pde2cad.layout.curvature import curvature_radius_of_points
 
 MESH_SUFFIXES = (".off", ".stl", ".obj", ".ply", ".glb", ".gltf")
 #: Points sampled from a mesh input (uniformly by area) to fit the patches to.
@@ -59,8 +62,12 @@ MIN_POINTS_PER_PATCH = 1000
 PATCH_RANGE = (12, 400)
 #: Input edges per patch side, at least, that the remesher gets (long edges are split).
 REMESH_EDGES_PER_SIDE = 8
-#: Subsample size for the surface mesh of a cloud (normals, Poisson).
-MESH_SUBSAMPLE = 60_000
+#: Most points laid out and fitted; larger clouds are fitted on a random subsample of this
+#: many (patches of 400+ points at the largest patch count; the projections, edge bands
+#: and per-patch solves grow with the points, their accuracy hardly does).
+FIT_POINTS = 150_000
+#: Points the guide mesh of a cloud is built from (normals, orientation, Poisson).
+GUIDE_POINTS = 20_000
 
 
 @dataclass
@@ -177,11 +184,31 @@ def _check_spread(points: NDArray[np.float64], path: Path) -> None:
         raise InputError(f"the points of {path} lie on a line; there is no surface to fit")
 
 
+def guide_subsample(points: NDArray[np.float64], target: int = GUIDE_POINTS) -> NDArray[np.float64]:
+    """About ``target`` points spread evenly over the surface (voxel centroids, open3d).
+
+    A voxel grid evens out the density of a raw scan (dense where the scanner lingered),
+    which the normal orientation and Poisson then see as uniform. The voxel size is found
+    in two passes: the number of occupied voxels of a surface grows as 1 / size^2.
+    """
+    import open3d as o3d
+
+    if len(points) <= target:
+        return points
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    size = float(np.linalg.norm(np.ptp(points, axis=0))) / 300.0
+    for _ in range(2):
+        count = len(pcd.voxel_down_sample(size).points)
+        size *= float(np.sqrt(count / target))
+    return np.asarray(pcd.voxel_down_sample(size).points, dtype=np.float64)
+
+
 def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """A triangle mesh through a cloud: normals + screened Poisson on a subsample.
 
-    1. At most ``MESH_SUBSAMPLE`` points (every k-th), normals from 20 neighbours, oriented
-       consistently over a tangent-plane graph.
+    1. About ``GUIDE_POINTS`` points (:func:`guide_subsample`), normals from 20 neighbours,
+       oriented consistently over a tangent-plane graph (its cost grows faster than the
+       point count: 9 s for 60k points, 1 s for 20k on this machine).
     2. Poisson (depth 7: the mesh only guides the layout; the patches fit the points),
        duplicate vertices merged (trimesh). Not trimmed: Instant Meshes returns nothing on
        the trimmed (holed) meshes tried.
@@ -189,7 +216,7 @@ def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDAr
     import open3d as o3d
     import trimesh
 
-    sub = points[:: max(1, len(points) // MESH_SUBSAMPLE)]
+    sub = guide_subsample(points)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
     pcd.orient_normals_consistent_tangent_plane(12)
@@ -220,7 +247,11 @@ def quad_remesh(
 
     Pure-quad mode subdivides every face of the quad-dominant result into quads, so the
     remesher is asked for a quarter of the faces. Its deterministic mode returns nothing on
-    some inputs (a torus), so it is not used; an empty result is retried with 1.5x faces.
+    some inputs (a torus), so it is not used. It also returns nothing, at any face count
+    tried (6-14), on some Poisson meshes (a noisy, unevenly dense sphere scan's, 82k
+    triangles), and gives a layout on the same mesh decimated to half its triangles; so an
+    empty result is retried on the mesh decimated by half (open3d quadric decimation) and
+    with 1.5x faces.
     """
     try:
         import pyinstantmeshes as pim
@@ -232,24 +263,43 @@ def quad_remesh(
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(triangles, dtype=np.int32)
     target = max(2, int(round(patches / 4)))
-    for _ in range(3):
+    for _ in range(REMESH_TRIES):
         out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
                                    crease_angle=float(crease_angle), pure_quad=True)
         if len(out_f):
             return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
         target = int(target * 1.5) + 1
+        v, f = _decimated(v, f)
     raise InputError(
         "the quad remesher found no layout for this surface; pass labels (--labels) or try "
         "another --patches count"
     )
 
 
+def _decimated(v: NDArray[np.float32], f: NDArray[np.int32]) -> tuple[Any, Any]:
+    """The mesh with half its triangles (open3d quadric decimation), as the remesher's arrays."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v.astype(np.float64)),
+                                     o3d.utility.Vector3iVector(f.astype(np.int32)))
+    half = mesh.simplify_quadric_decimation(max(100, len(f) // 2))
+    return (np.ascontiguousarray(np.asarray(half.vertices), dtype=np.float32),
+            np.ascontiguousarray(np.asarray(half.triangles), dtype=np.int32))
+
+
 def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
-                triangles: NDArray[np.int64], patches: int | None, patch_size: float | None,
-                crease_angle: float) -> int:
-    """Patches to ask for: ``patches``; or area / ``patch_size``^2; or by default area / L^2
-    with L = ``TURN_PER_PATCH`` x the surface's small radius of curvature, at least
-    ``PATCH_RANGE[0]``, at most one per ``MIN_POINTS_PER_PATCH`` points and ``PATCH_RANGE[1]``.
+                triangles: NDArray[np.int64], patches: int | None, patch_size: float | None) -> int:
+    """Patches to ask for: ``patches``; or area / ``patch_size``^2; or by default by curvature.
+
+    By default area / L^2 with side L = ``TURN_PER_PATCH`` x a small radius of curvature
+    (the remesher's faces are all about one size, so the most curved parts set it),
+    measured on the points by local quadric fits
+    (:func:`pde2cad.layout.curvature.curvature_radius_of_points`: within 20 % on a clean or
+    a 0.2 % noisy scan and at any density, where the Poisson guide mesh's faceting read
+    4-25x too curved and the count hit its cap on every cloud). Not the point count: a
+    denser scan of the same shape gets the same layout. (An average curvature instead
+    gave an ellipsoid 36 patches, and all three layouts folded at its ends.) The count is at least ``PATCH_RANGE[0]``,
+    at most ``PATCH_RANGE[1]`` and one per ``MIN_POINTS_PER_PATCH`` points.
     """
     if patches is not None:
         return int(patches)
@@ -258,7 +308,7 @@ def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
                                 axis=1).sum() / 2)
     if patch_size is not None:
         return int(np.clip(area / patch_size**2, 1, 4 * PATCH_RANGE[1]))
-    side = TURN_PER_PATCH * curvature_radius(vertices, triangles, crease_angle)
+    side = TURN_PER_PATCH * curvature_radius_of_points(points, CURVATURE_PERCENTILE)
     wanted = area / side**2 if np.isfinite(side) else 0.0
     most = min(PATCH_RANGE[1], len(points) // MIN_POINTS_PER_PATCH)
     return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
@@ -283,9 +333,17 @@ def _refined(vertices: NDArray[np.float64], triangles: NDArray[np.int64], patche
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
 
 
+def guide_mesh(surface: Surface) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The triangle mesh the remesher works on: the input mesh, or a cloud's Poisson mesh."""
+    if surface.triangles is None or surface.vertices is None:
+        return surface_mesh(surface.points)
+    return surface.vertices, surface.triangles
+
+
 def auto_layout(
     surface: Surface, *, patches: int | None = None, patch_size: float | None = None,
     crease_angle: float = CREASE_ANGLE,
+    guide: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None,
 ) -> AutoLayout:
     """One label per point of ``surface``: a coarse quad mesh's faces as patches.
 
@@ -293,17 +351,17 @@ def auto_layout(
     ----------
     surface : Surface
     patches : int, optional
-        About how many patches (default from the point count).
+        About how many patches (default from the curvature, see :func:`patch_count`).
     patch_size : float, optional
         About how long a patch side is (model units); overrides the default count.
     crease_angle : float
         Dihedral angle (degrees) above which the remesher aligns to an edge as a crease.
+    guide : (vertices, triangles), optional
+        :func:`guide_mesh` of ``surface`` when already made (it is the slow step for a
+        cloud, and the same for every layout tried).
     """
-    if surface.triangles is None or surface.vertices is None:
-        vertices, tris = surface_mesh(surface.points)
-    else:
-        vertices, tris = surface.vertices, surface.triangles
-    count = patch_count(surface.points, vertices, tris, patches, patch_size, crease_angle)
+    vertices, tris = guide_mesh(surface) if guide is None else guide
+    count = patch_count(surface.points, vertices, tris, patches, patch_size)
     normals = point_normals(surface.points)
     fine_v, fine_t = _refined(vertices, tris, count)
     q_vertices, faces, _ = best_layout(
@@ -323,6 +381,9 @@ def auto_layout(
     return AutoLayout(labels, q_vertices, faces, summary)
 
 
+#: Remesher runs per layout before giving up (each asks for 1.5x the faces of the last).
+REMESH_TRIES = 5
+
 #: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
 #: face the pipeline reads with a spurious corner, or a face that folds at a corner).
 ATTEMPTS = 3
@@ -341,12 +402,21 @@ def _fold_angle(rec: object) -> float:
 
 def reconstruct_auto(surface: Surface, *, patches: int | None = None,
                      patch_size: float | None = None, crease_angle: float = CREASE_ANGLE,
+                     message: Callable[[str], None] | None = None,
                      **kwargs: object) -> tuple[object, AutoLayout]:
     """:func:`auto_layout` then :func:`pde2cad.reconstruct.reconstruct`, up to ``ATTEMPTS``
     layouts.
 
-    1. A layout the pipeline rejects (a segment with other than 3 or 4 corners) is remeshed.
-    2. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
+    1. A cloud of more than ``FIT_POINTS`` points is laid out and fitted on a random
+       subsample of that many (the layout and fit cost grows with the points, their
+       accuracy hardly: patches of 500+ points each); at the end every input point takes
+       the label of its nearest subsample point (one KD-tree query), so ``layout.labels``
+       has one label per input point.
+    2. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
+    3. A layout the pipeline rejects (a segment with other than 3 or 4 corners, or one whose
+       points fall apart in the pipeline's neighbour graph, seen on a scan with 4x density
+       changes) is remeshed.
+    4. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
        folded at a corner) is remeshed too; the result with the smallest such angle is kept.
 
     Returns
@@ -356,22 +426,47 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     """
     from pde2cad.reconstruct import reconstruct
 
+    say = message or (lambda text: None)
+    full = surface
+    if len(surface.points) > FIT_POINTS:
+        pick = np.sort(np.random.default_rng(0).choice(len(surface.points), FIT_POINTS,
+                                                       replace=False))
+        surface = dataclasses.replace(surface, points=surface.points[pick])
+        say(f"fitting a random {FIT_POINTS} of the {len(full.points)} points")
+    if surface.triangles is None:
+        say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")
+    guide = guide_mesh(surface)
     best: tuple[float, object, AutoLayout] | None = None
     for attempt in range(ATTEMPTS):
         layout = auto_layout(surface, patches=patches, patch_size=patch_size,
-                             crease_angle=crease_angle)
+                             crease_angle=crease_angle, guide=guide)
+        say(f"layout {attempt + 1}: {layout.summary['patches']} patches; fitting")
         try:
             rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
         except InputError as exc:
-            if "corners" not in str(exc) or (attempt == ATTEMPTS - 1 and best is None):
+            retry = "corners" in str(exc) or "falls apart" in str(exc)
+            if not retry or (attempt == ATTEMPTS - 1 and best is None):
                 raise InputError(f"the automatic layout failed: {exc}") from exc
+            say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
         if layout.summary.get("creases"):
-            return rec, layout
+            return rec, _all_points(layout, surface, full)
         angle = _fold_angle(rec)
         if best is None or angle < best[0]:
             best = (angle, rec, layout)
         if angle <= FOLD_ANGLE:
             break
+        if attempt < ATTEMPTS - 1:
+            say(f"layout {attempt + 1} folds (seam angle {angle:.0f} deg); remeshing")
     assert best is not None
-    return best[1], best[2]
+    return best[1], _all_points(best[2], surface, full)
+
+
+def _all_points(layout: AutoLayout, fitted: Surface, full: Surface) -> AutoLayout:
+    """``layout`` with a label for every point of ``full`` (nearest fitted point's)."""
+    if fitted is full:
+        return layout
+    from scipy.spatial import cKDTree
+
+    _, nearest = cKDTree(fitted.points).query(full.points, workers=-1)
+    return dataclasses.replace(layout, labels=layout.labels[nearest])

@@ -101,9 +101,9 @@ class SewInfo:
     n_free_edges : int
         Edges bounded by only one face, as counted by the sewing algorithm.
     is_closed : bool
-        The result is exactly one closed shell.
+        Every shell of the result is closed (no free edges).
     is_solid : bool
-        A solid was built from that closed shell.
+        Solids were built from those shells (one per outer shell, inner shells as voids).
     valid : bool
         ``BRepCheck_Analyzer`` accepts the returned shape.
     """
@@ -270,8 +270,9 @@ def sew(
     Returns
     -------
     shape : TopoDS_Shape
-        A solid when the faces form exactly one closed shell (oriented so its volume is
-        positive), otherwise the sewn shell, compound of shells, or single face.
+        When every shell is closed: a solid per outer shell, with the shells inside it as
+        voids (one solid, or a compound of solids for several bodies; see :func:`_solids`).
+        Otherwise the sewn shell, compound of shells, or single face.
     info : SewInfo
         Face, shell and free-edge counts and the ``BRepCheck_Analyzer`` verdict.
     """
@@ -288,25 +289,15 @@ def sew(
         raise ExportError("OCCT sewing produced no shape")
     n_free = int(sewing.NbFreeEdges())
     n_shells = _count(sewn, TopAbs_SHELL)
-    closed = False
+    shells = [TopoDS.Shell_s(sh) for sh in _subshapes(sewn, TopAbs_SHELL)]
+    # BRep_Tool.IsClosed checks every edge is shared by two faces of the shell; the free
+    # edge count is checked too so a shell closed only up to tolerance is not trusted.
+    closed = bool(shells) and n_free == 0 and all(BRep_Tool.IsClosed_s(sh) for sh in shells)
     shape = sewn
-    if n_shells == 1:
-        explorer = TopExp_Explorer(sewn, TopAbs_SHELL)
-        shell = TopoDS.Shell_s(explorer.Current())
-        # BRep_Tool.IsClosed checks every edge is shared by two faces of the shell; the free
-        # edge count is checked too so a shell closed only up to tolerance is not trusted.
-        closed = bool(BRep_Tool.IsClosed_s(shell)) and n_free == 0
-        if closed:
-            maker = BRepBuilderAPI_MakeSolid(shell)
-            if maker.IsDone():
-                fixer = ShapeFix_Solid(maker.Solid())
-                fixer.Perform()
-                solid = fixer.Solid()
-                # ShapeFix_Solid orients the shell outward in the usual case; the volume sign
-                # is the definitive check, so flip an inside-out result ourselves.
-                if volume(solid) < 0:
-                    solid = solid.Reversed()
-                shape = solid
+    if closed:
+        solids = _solids(shells)
+        if solids is not None:
+            shape = solids
     info = SewInfo(
         n_faces=_count(shape, TopAbs_FACE),
         n_shells=n_shells,
@@ -316,6 +307,81 @@ def sew(
         valid=bool(BRepCheck_Analyzer(shape).IsValid()),
     )
     return shape, info
+
+
+def _subshapes(shape: TopoDS_Shape, kind: Any) -> list[TopoDS_Shape]:
+    explorer = TopExp_Explorer(shape, kind)
+    found = []
+    while explorer.More():
+        found.append(explorer.Current())
+        explorer.Next()
+    return found
+
+
+def _oriented_solid(shell: Any) -> TopoDS_Shape | None:
+    """A solid of one closed shell, turned outward (positive volume)."""
+    maker = BRepBuilderAPI_MakeSolid(shell)
+    if not maker.IsDone():
+        return None
+    fixer = ShapeFix_Solid(maker.Solid())
+    fixer.Perform()
+    solid = fixer.Solid()
+    # ShapeFix_Solid orients the shell outward in the usual case; the volume sign is the
+    # definitive check, so flip an inside-out result ourselves.
+    return solid.Reversed() if volume(solid) < 0 else solid
+
+
+def _solids(shells: list[Any]) -> TopoDS_Shape | None:
+    """Solids of closed shells: separate bodies, and shells inside another as its voids.
+
+    1. Each shell alone as an outward solid; the largest volume first.
+    2. A shell whose vertex lies inside another shell's solid is inside it; its depth is
+       how many shells hold it. Even depth: an outer shell (a body); odd: a void of the
+       innermost shell holding it (a ball in a hollow ball is a third body).
+    3. One solid per body (``BRepBuilderAPI_MakeSolid`` with the voids added, each
+       turned inward); one body is returned as a solid, several as a compound.
+    """
+    from OCP.BRepClass3d import BRepClass3d_SolidClassifier
+    from OCP.TopAbs import TopAbs_IN, TopAbs_VERTEX
+
+    alone = [_oriented_solid(sh) for sh in shells]
+    if any(s is None for s in alone):
+        return None
+    vol = [volume(s) for s in alone]  # type: ignore[arg-type]
+    order = sorted(range(len(shells)), key=lambda i: -vol[i])
+    probe = [BRep_Tool.Pnt_s(TopoDS.Vertex_s(_subshapes(sh, TopAbs_VERTEX)[0])) for sh in shells]
+    holders: dict[int, list[int]] = {i: [] for i in order}
+    for i in order:
+        for j in order:
+            if i != j and vol[j] > vol[i]:
+                inside = BRepClass3d_SolidClassifier(alone[j], probe[i], 1e-7)
+                if inside.State() == TopAbs_IN:
+                    holders[i].append(j)
+    bodies: list[TopoDS_Shape] = []
+    for i in order:
+        if len(holders[i]) % 2:
+            continue
+        voids = [j for j in order if len(holders[j]) == len(holders[i]) + 1 and i in holders[j]]
+        if not voids:
+            bodies.append(alone[i])  # type: ignore[arg-type]
+            continue
+        maker = BRepBuilderAPI_MakeSolid(TopoDS.Shell_s(_subshapes(alone[i], TopAbs_SHELL)[0]))
+        for j in voids:
+            maker.Add(TopoDS.Shell_s(_subshapes(alone[j], TopAbs_SHELL)[0].Reversed()))
+        bodies.append(maker.Solid())
+    return _compound(bodies)
+
+
+def _compound(parts: list[TopoDS_Shape]) -> TopoDS_Shape:
+    """One shape alone, several as a compound."""
+    if len(parts) == 1:
+        return parts[0]
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    for part in parts:
+        builder.Add(compound, part)
+    return compound
 
 
 def _check_units(units: str) -> str:
@@ -556,15 +622,7 @@ def as_topods(obj: object) -> TopoDS_Shape:
     if callable(vals):  # CadQuery Workplane
         return as_topods(list(vals()))
     if isinstance(obj, (list, tuple)) and obj:
-        parts = [as_topods(o) for o in obj]
-        if len(parts) == 1:
-            return parts[0]
-        compound = TopoDS_Compound()
-        builder = BRep_Builder()
-        builder.MakeCompound(compound)
-        for part in parts:
-            builder.Add(compound, part)
-        return compound
+        return _compound([as_topods(o) for o in obj])
     raise InputError(
         f"cannot export a {type(obj).__name__}: give a TopoDS_Shape, a build123d or CadQuery "
         "shape, a Workplane, a list of shapes, or a reconstruction result"
