@@ -132,12 +132,7 @@ class _Fitter:
     def fit_many(
         self, i: int, stops: NDArray[np.int64], p0, p3s, tan0, tan3s, names: list[str] | None = None
     ) -> list[tuple[CubicFit, bool]]:
-        """Fit points[i..stop] for every stop at once, each with every parameterization.
-
-        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
-        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
-        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
-        5. per candidate keep the best fit: passing first, then the least maximum error.
+        """Fit points[i..stop] for every stop at once (:meth:`fit_spans` from one start).
 
         Parameters
         ----------
@@ -147,20 +142,44 @@ class _Fitter:
         tan3s : (m, D) float or None
             End tangent of each candidate.
         """
+        stops = np.asarray(stops, dtype=np.int64)
+        m = len(stops)
+        p0s = np.broadcast_to(np.asarray(p0, dtype=float), (m, self.points.shape[1]))
+        tan0s = None if tan0 is None else np.broadcast_to(np.asarray(_unit(tan0), dtype=float), p0s.shape)
+        return self.fit_spans(np.full(m, i, dtype=np.int64), stops, p0s, p3s, tan0s, tan3s, names)
+
+    def fit_spans(
+        self, starts: NDArray[np.int64], stops: NDArray[np.int64], p0s, p3s, tan0s, tan3s,
+        names: list[str] | None = None,
+    ) -> list[tuple[CubicFit, bool]]:
+        """Fit points[start..stop] for every span at once, each with every parameterization.
+
+        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
+        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
+        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
+        5. per candidate keep the best fit: passing first, then the least maximum error.
+
+        Parameters
+        ----------
+        starts, stops : (m,) int, stops > starts
+        p0s, p3s : (m, D) float
+            End points of each candidate.
+        tan0s, tan3s : (m, D) float or None
+            End tangents of each candidate (None: free at that end, for all candidates).
+        """
         names = self.names if names is None else names
+        starts = np.asarray(starts, dtype=np.int64)
         stops = np.asarray(stops, dtype=np.int64)
         m, nm = len(stops), len(names)
-        lengths = stops - i + 1
-        rows = np.minimum(i + np.arange(int(lengths.max()))[None, :], stops[:, None])
+        lengths = stops - starts + 1
+        rows = np.minimum(starts[:, None] + np.arange(int(lengths.max()))[None, :], stops[:, None])
         pts = np.tile(self.points[rows], (nm, 1, 1))
         valid = np.tile(np.arange(rows.shape[1])[None, :] < lengths[:, None], (nm, 1))
         ppts = self.param_points[rows]
         t = np.concatenate([batchfit.parameters(name, ppts, lengths) for name in names])
-        dim = pts.shape[2]
         batch = batchfit.Batch(
-            pts, valid,
-            np.broadcast_to(np.asarray(p0, dtype=float), (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
-            None if tan0 is None else np.broadcast_to(np.asarray(_unit(tan0), dtype=float), (m * nm, dim)),
+            pts, valid, np.tile(np.asarray(p0s, dtype=float), (nm, 1)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
+            None if tan0s is None else np.tile(_unit_rows(tan0s), (nm, 1)),
             None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
         )
         ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
@@ -589,17 +608,21 @@ def line_chain(points, p0, p3, tolerance: float) -> ChainFit | None:
     return chain
 
 
-def straighten(chain: ChainFit, points: NDArray[np.float64], tolerance: float) -> ChainFit:
+def straighten(
+    chain: ChainFit, points: NDArray[np.float64], tolerance: float, closed: bool = False
+) -> ChainFit:
     """Make every piece whose points lie within the tolerance of its chord a straight line.
 
     A least-squares cubic over a straight pixel edge bulges gently within the tolerance; its
     chord has the same end points and follows the edge. At a G1 join (not in
     ``chain.corners``; the chain's own ends count as corners) the chord may turn at most
     :data:`LINE_KINK` degrees from the join tangent, so a short chord of a round arc never
-    puts a corner into a smooth outline.
+    puts a corner into a smooth outline. With ``closed`` the chain's ends meet at a join,
+    sharp only when 0 is in ``chain.corners``.
     """
     lines = list(chain.lines) or [False] * len(chain.fits)
-    sharp = set(chain.corners) | {0, len(chain.fits)}
+    ends = {0, len(chain.fits)} if not closed or 0 in chain.corners else set()
+    sharp = set(chain.corners) | ends
     cos_kink = np.cos(np.radians(LINE_KINK))
     for k, (a, b) in enumerate(zip(chain.breaks[:-1], chain.breaks[1:])):
         if lines[k]:

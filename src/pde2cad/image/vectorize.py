@@ -17,13 +17,14 @@ from numpy.typing import NDArray
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import points_to_curves
 from pde2cad.curves.fit import CubicFit
+from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
     SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed,
 )
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
-from pde2cad.image.corners import CORNER_ANGLE, detect_corners
+from pde2cad.image.corners import CORNER_ANGLE, CORNER_SCALE, detect_corners
 from pde2cad.image.drawing import Drawing, OutlineLoop
 from pde2cad.image.raster import read_image, to_mask
 
@@ -249,7 +250,10 @@ def _fit_loop(
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
-    chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    # Straight sides are lines spanning both chords of the corner test (see merge_closed).
+    chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
+                            method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
     is_line = list(chain.lines) or [False] * len(curves)
