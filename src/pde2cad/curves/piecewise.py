@@ -245,6 +245,8 @@ def fit_chain(
     max_pieces: int | None = None,
     deadline: float | None = None,
     edge_midpoints: bool = False,
+    free_joins: bool = True,
+    prefer_breaks: NDArray[np.bool_] | None = None,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -284,6 +286,14 @@ def fit_chain(
     edge_midpoints : bool
         Also hold the tolerance at the midpoints between consecutive points (pixel
         boundaries: the middle of a 1-px tip edge can be farther than both its ends).
+    free_joins : bool
+        With ``g1``, first place the breaks as C0 pieces reach and fit each join's tangent
+        as a free unknown shared by both pieces (:func:`g1_joins`); only where that fails,
+        search breaks with the tangents of ``join_tangents`` fixed. A G1 join then costs
+        no extra curve wherever a G1 fit exists at the C0 breaks.
+    prefer_breaks : (n,) bool, optional
+        C0 joins only: a break that is not on such a point moves back to the last one in
+        the final third of its piece, where one passes.
 
     Returns
     -------
@@ -303,6 +313,16 @@ def fit_chain(
     else:
         joins, jtan = pts, None
     fitter = _Fitter(pts, tolerance, ppts, method, rounds, edge_midpoints)
+    if g1 and free_joins:
+        # Breaks where C0 pieces reach, then one shared tangent per join (see g1_joins).
+        # C0 breaks go to kinks where they can (those joins may stay C0).
+        kinks = _kinks(pts, np.arange(len(pts)), max(2, int(round(2.0 * tolerance))))
+        c0 = fit_chain(pts, tolerance, p_start=p_start, p_end=p_end, tan_start=tan_start, tan_end=tan_end,
+                       g1=False, param_points=ppts, method=method, rounds=rounds, max_pieces=max_pieces,
+                       deadline=deadline, edge_midpoints=edge_midpoints, prefer_breaks=kinks)
+        joined = g1_joins(fitter, c0, tan_start, tan_end) if c0.ok else None
+        if joined is not None:
+            return joined
     end = len(pts) - 1
     start = 0
     first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
@@ -323,6 +343,8 @@ def fit_chain(
             stop = end
         else:
             stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+        if stop < end and prefer_breaks is not None and not prefer_breaks[stop]:
+            stop, fit, ok = _snap_to_kink(fitter, start, stop, fit, ok, p0, tan, joins, prefer_breaks)
         if stop < end and end - stop < MIN_POINTS - 1:
             # Leave the last piece enough points to be determined, if a slightly shorter
             # piece still passes (fit-ability is only nearly monotone in the length).
@@ -365,6 +387,127 @@ def fit_chain(
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
     return chain
+
+
+#: Shared join tangents tried per sweep, as blends ``(1 - w) a + w b`` of the two C0
+#: pieces' own tangents ``a`` (ending) and ``b`` (starting) there; w outside [0, 1] turns
+#: past both.
+_BLENDS = np.array([-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5])
+_SWEEPS = 2
+
+
+def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end) -> ChainFit | None:
+    """Make the interior joins of a C0 chain G1 at the same break points, or None.
+
+    The tangent at each join is a free unknown shared by the two pieces there. A join
+    stays C0 only where the points themselves turn there by :data:`KINK_ANGLE` or more
+    within twice the tolerance on either side (a corner at the tolerance's scale, such as
+    the steps of an upscaled staircase) and no G1 tangent passes.
+    Steps: 1. start each join from the mean of its two C0 tangents; 2. red-black sweeps:
+    for all odd joins at once (then all even ones), refit both neighbouring pieces for
+    every tangent of :data:`_BLENDS` (the other ends held) and keep the tangent that passes
+    with the least error (a kink with none keeps C0: free tangents); 3. refit every piece
+    with the final tangents and all parameterizations; None unless every piece passes.
+    """
+    k = len(c0.fits)
+    if k < 2:
+        return c0
+    curves, breaks = c0.curves, c0.breaks
+    a = np.array([end_tangent(c) if end_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[:-1]])
+    b = np.array([start_tangent(c) if start_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[1:]])
+    theta = _unit_rows(a + b)  # (k - 1,) joins 1..k-1
+    kink = _kinks(fitter.points, breaks[1:-1], max(2, int(round(2.0 * fitter.tol / SAFETY))))
+    cusp = np.linalg.norm(theta, axis=1) < 0.5  # the pieces leave the join in opposite directions
+    if np.any(cusp & ~kink):
+        return None
+    theta[cusp] = np.nan
+    for _ in range(_SWEEPS):
+        for parity in (1, 0):
+            joins = np.arange(1, k)[np.arange(1, k) % 2 == parity]
+            if joins.size:
+                theta[joins - 1] = _best_tangents(fitter, c0, theta, joins, a, b, tan_start, tan_end, kink)
+    fits = _fit_pieces(fitter, c0, theta, np.arange(k), None, None, tan_start, tan_end, fitter.all_names)
+    if not all(good for _, good in fits):
+        return None
+    sharp = [int(j) for j in np.flatnonzero(np.isnan(theta[:, 0])) + 1]
+    return ChainFit(np.stack([f.ctrl for f, _ in fits]), [f for f, _ in fits], breaks.copy(), sharp, True)
+
+
+#: Turn (degrees) of the points within twice the tolerance either side of a join above
+#: which the join may stay C0 (the corner angle of :mod:`pde2cad.image.corners`).
+KINK_ANGLE = 50.0
+
+
+def _kinks(points: NDArray[np.float64], at: NDArray[np.int64], reach: int) -> NDArray[np.bool_]:
+    """Per index in ``at``: the chords to the points ``reach`` back and ahead turn by at
+    least :data:`KINK_ANGLE` (ends clipped to the run)."""
+    n = len(points)
+    u = points[at] - points[np.maximum(at - reach, 0)]
+    v = points[np.minimum(at + reach, n - 1)] - points[at]
+    cos = (u * v).sum(axis=1) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
+    return cos <= np.cos(np.radians(KINK_ANGLE))
+
+
+def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start, tan_end, kink):
+    """For each join (1..k-1) in ``joins``, the blend tangent that lets both its pieces pass
+    with the least maximum error; where none passes, free tangents (NaN) at a kink, else
+    the current one."""
+    m = len(_BLENDS)
+    cand = _unit_rows(((1.0 - _BLENDS)[None, :, None] * a[joins - 1, None] + _BLENDS[None, :, None] * b[joins - 1, None]).reshape(-1, a.shape[1]))
+    rep = np.repeat(joins, m)
+    left = _fit_pieces(fitter, c0, theta, rep - 1, None, cand, tan_start, tan_end)
+    right = _fit_pieces(fitter, c0, theta, rep, cand, None, tan_start, tan_end)
+    err = np.array([max(fl.max_error, fr.max_error) for (fl, _), (fr, _) in zip(left, right)])
+    good = np.array([gl and gr for (_, gl), (_, gr) in zip(left, right)])
+    err = np.where(good & (np.linalg.norm(cand, axis=1) > 0.5), err, np.inf).reshape(-1, m)
+    pick = np.argmin(err, axis=1)
+    found = np.isfinite(err[np.arange(len(joins)), pick])
+    new = cand.reshape(-1, m, a.shape[1])[np.arange(len(joins)), pick]
+    keep = np.where(kink[joins - 1, None], np.nan, theta[joins - 1])
+    return np.where(found[:, None], new, keep)
+
+
+def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan, tan_start, tan_end, names=None):
+    """Fit C0 chain pieces at their break points with join tangents ``theta`` (joins 1..k-1)
+    or the overrides ``start_tan`` / ``end_tan`` (one row per piece); chain ends keep
+    ``tan_start`` / ``tan_end`` (None: free). Batched per kind of end constraint."""
+    k = len(c0.fits)
+    dim = c0.curves.shape[2]
+    t0 = [None if j == 0 and tan_start is None else (np.asarray(tan_start, float) if j == 0 else theta[j - 1]) for j in pieces]
+    t3 = [None if j == k - 1 and tan_end is None else (np.asarray(tan_end, float) if j == k - 1 else theta[j]) for j in pieces]
+    if start_tan is not None:
+        t0 = list(start_tan)
+    if end_tan is not None:
+        t3 = list(end_tan)
+    t0 = [None if v is None or np.isnan(v[0]) else v for v in t0]  # NaN: a C0 join, free
+    t3 = [None if v is None or np.isnan(v[0]) else v for v in t3]
+    out: list[tuple[CubicFit, bool] | None] = [None] * len(pieces)
+    for has0 in (False, True):
+        for has3 in (False, True):
+            sel = [i for i in range(len(pieces)) if (t0[i] is not None) == has0 and (t3[i] is not None) == has3]
+            if not sel:
+                continue
+            js = np.asarray(pieces)[sel]
+            res = fitter.fit_spans(
+                c0.breaks[js], c0.breaks[js + 1], c0.curves[js, 0], c0.curves[js, 3],
+                np.stack([t0[i] for i in sel]).reshape(-1, dim) if has0 else None,
+                np.stack([t3[i] for i in sel]).reshape(-1, dim) if has3 else None, names,
+            )
+            for i, r in zip(sel, res):
+                out[i] = r
+    return out
+
+
+def _snap_to_kink(fitter: _Fitter, start: int, stop: int, fit: CubicFit, ok: bool, p0, tan, joins, prefer):
+    """The piece start..stop moved back to end on the last preferred point in its final
+    third, when that shorter piece passes; else the piece as it was."""
+    lo = start + max(MIN_POINTS - 1, (2 * (stop - start)) // 3)
+    cand = np.flatnonzero(prefer[lo:stop]) + lo
+    if not ok or not cand.size:
+        return stop, fit, ok
+    c = int(cand[-1])
+    new, good = _test(fitter, start, [c], p0, tan, joins[c][None], None)[0]
+    return (c, new, True) if good else (stop, fit, ok)
 
 
 def _test(fitter: _Fitter, start: int, stops, p0, tan, p3s, tan3s) -> list[tuple[CubicFit, bool]]:
