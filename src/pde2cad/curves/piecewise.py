@@ -247,6 +247,7 @@ def fit_chain(
     edge_midpoints: bool = False,
     free_joins: bool = True,
     prefer_breaks: NDArray[np.bool_] | None = None,
+    corner_points: NDArray[np.bool_] | None = None,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -294,6 +295,9 @@ def fit_chain(
     prefer_breaks : (n,) bool, optional
         C0 joins only: a break that is not on such a point moves back to the last one in
         the final third of its piece, where one passes.
+    corner_points : (n,) bool, optional
+        With ``free_joins``: points where a join may stay C0 besides the kinks (detected
+        corners).
 
     Returns
     -------
@@ -316,11 +320,13 @@ def fit_chain(
     if g1 and free_joins:
         # Breaks where C0 pieces reach, then one shared tangent per join (see g1_joins).
         # C0 breaks go to kinks where they can (those joins may stay C0).
-        kinks = _kinks(pts, np.arange(len(pts)), max(2, int(round(2.0 * tolerance))))
+        kinks = _kinks(pts, np.arange(len(pts)), kink_reach(tolerance))
+        if corner_points is not None:
+            kinks |= np.asarray(corner_points, dtype=bool)
         c0 = fit_chain(pts, tolerance, p_start=p_start, p_end=p_end, tan_start=tan_start, tan_end=tan_end,
                        g1=False, param_points=ppts, method=method, rounds=rounds, max_pieces=max_pieces,
                        deadline=deadline, edge_midpoints=edge_midpoints, prefer_breaks=kinks)
-        joined = g1_joins(fitter, c0, tan_start, tan_end) if c0.ok else None
+        joined = g1_joins(fitter, c0, tan_start, tan_end, kinks) if c0.ok else None
         if joined is not None:
             return joined
     end = len(pts) - 1
@@ -396,13 +402,14 @@ _BLENDS = np.array([-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5])
 _SWEEPS = 2
 
 
-def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end) -> ChainFit | None:
+def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end, sharp_ok: NDArray[np.bool_]) -> ChainFit | None:
     """Make the interior joins of a C0 chain G1 at the same break points, or None.
 
     The tangent at each join is a free unknown shared by the two pieces there. A join
-    stays C0 only where the points themselves turn there by :data:`KINK_ANGLE` or more
-    within twice the tolerance on either side (a corner at the tolerance's scale, such as
-    the steps of an upscaled staircase) and no G1 tangent passes.
+    stays C0 only where ``sharp_ok`` (per point) allows it and no G1 tangent passes:
+    detected corners, and kinks where the points turn by :data:`KINK_ANGLE` or more within
+    twice the tolerance on either side (a corner at the tolerance's scale, such as the
+    steps of an upscaled staircase).
     Steps: 1. start each join from the mean of its two C0 tangents; 2. red-black sweeps:
     for all odd joins at once (then all even ones), refit both neighbouring pieces for
     every tangent of :data:`_BLENDS` (the other ends held) and keep the tangent that passes
@@ -416,7 +423,7 @@ def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end) -> ChainFit | No
     a = np.array([end_tangent(c) if end_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[:-1]])
     b = np.array([start_tangent(c) if start_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[1:]])
     theta = _unit_rows(a + b)  # (k - 1,) joins 1..k-1
-    kink = _kinks(fitter.points, breaks[1:-1], max(2, int(round(2.0 * fitter.tol / SAFETY))))
+    kink = sharp_ok[breaks[1:-1]]
     cusp = np.linalg.norm(theta, axis=1) < 0.5  # the pieces leave the join in opposite directions
     if np.any(cusp & ~kink):
         return None
@@ -436,6 +443,11 @@ def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end) -> ChainFit | No
 #: Turn (degrees) of the points within twice the tolerance either side of a join above
 #: which the join may stay C0 (the corner angle of :mod:`pde2cad.image.corners`).
 KINK_ANGLE = 50.0
+
+
+def kink_reach(tolerance: float) -> int:
+    """Points either side over which a kink is measured: twice the tolerance, at least 2."""
+    return max(2, int(round(2.0 * tolerance)))
 
 
 def _kinks(points: NDArray[np.float64], at: NDArray[np.int64], reach: int) -> NDArray[np.bool_]:
@@ -630,6 +642,7 @@ def fit_closed(
     sharpen: bool = True,
     deadline: float | None = None,
     lines: bool = True,
+    soft_corners: NDArray[np.int64] | None = None,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -657,6 +670,9 @@ def fit_closed(
         See :func:`fit_chain`.
     lines : bool
         Straight runs become line segments (:func:`line_chain`, :func:`straighten`).
+    soft_corners : (s,) int, optional
+        Points where joins inside a run may stay C0 (corners that are not forced breaks;
+        see :func:`fit_chain`'s ``corner_points``).
 
     Returns
     -------
@@ -701,6 +717,10 @@ def fit_closed(
     offset = int(cidx[0])
     ring = np.r_[offset:n, 0 : offset + 1]
     closed = pts[ring]
+    soft = None
+    if soft_corners is not None:
+        soft = np.zeros(n, bool)
+        soft[np.asarray(soft_corners, dtype=np.int64) % n] = True
     cuts = np.concatenate([cidx - offset, [n]])
     tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
     tips = np.vstack([tips, tips[:1]])
@@ -714,7 +734,7 @@ def fit_closed(
         if chain is None:
             chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
                               param_points=pos, join_tangents=tan, method=method, deadline=deadline,
-                              edge_midpoints=True)
+                              edge_midpoints=True, corner_points=None if soft is None else soft[ring][a : b + 1])
             chain = straighten(chain, run, tolerance) if lines else chain
         flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))
@@ -725,6 +745,50 @@ def fit_closed(
     chain = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list)))
     chain.lines = flags
     return chain, offset
+
+
+def fit_closed_free(
+    points: NDArray[np.float64],
+    tolerance: float,
+    *,
+    corners: NDArray[np.int64] | None = None,
+    method: str = "optimal",
+    deadline: float | None = None,
+) -> tuple[ChainFit, int]:
+    """Fit a closed loop with breaks wherever C0 pieces reach and G1 joins made on them.
+
+    Unlike :func:`fit_closed`, the detected corners are not forced breaks, only places
+    where a join may stay C0 (as may kinks, see :func:`g1_joins`), so a loop whose
+    "corners" are raster noise costs what a plain least-squares fitter would.
+    Steps: 1. open the loop at its first corner or kink (C0 closing join), else at its
+    sharpest turn with the denoised tangent there (G1 closing join); 2. fit the run with
+    :func:`fit_chain` (``free_joins``); 3. make pieces straight where their chord fits.
+
+    Returns
+    -------
+    (ChainFit, offset)
+        As :func:`fit_closed`.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    pos, tan = denoise(pts, closed=True)
+    loop3 = np.vstack([pts, pts, pts])
+    allowed = _kinks(loop3, n + np.arange(n), min(kink_reach(tolerance), max(1, n // 4)))
+    cidx = np.asarray(corners, dtype=np.int64) % n if corners is not None and len(corners) else np.arange(0)
+    allowed[cidx] = True
+    if allowed.any():
+        offset = int(cidx[0]) if cidx.size else int(np.flatnonzero(allowed)[0])
+        t_end = None
+    else:
+        offset = _max_curvature_index(pos)
+        t_end = tan[offset]
+    ring = np.r_[offset:n, 0 : offset + 1]
+    chain = fit_chain(pts[ring], tolerance, tan_start=t_end, tan_end=t_end, g1=True, param_points=pos[ring],
+                      join_tangents=tan[ring], method=method, deadline=deadline, edge_midpoints=True,
+                      corner_points=allowed[ring])
+    if t_end is None or len(chain.fits) == 1:
+        chain.corners = sorted(set(chain.corners) | {0})
+    return straighten(chain, pts[ring], tolerance, closed=True), offset
 
 
 def _segment_distance(points: NDArray[np.float64], p0: NDArray[np.float64], p3: NDArray[np.float64]):

@@ -20,7 +20,7 @@ from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
-    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed,
+    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed, fit_closed_free,
 )
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
@@ -251,6 +251,8 @@ def _fit_loop(
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
     chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    if g1 and len(chain.fits) > 1:
+        chain, offset = _soft_corner_fit(pts, corners, chain, offset, tol, method, deadline)
     # Straight sides are lines spanning both chords of the corner test (see merge_closed).
     chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
                             method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
@@ -280,6 +282,26 @@ def _fit_loop(
         fitted_curves=int(fitted),
         is_line=is_line,
     )
+
+
+def _soft_corner_fit(pts, corners, chain: ChainFit, offset: int, tol: float, method: str, deadline):
+    """The loop refitted with only the corners at straight sides as forced breaks (the
+    others allowed C0 joins), when that takes fewer pieces than ``chain``.
+
+    Detected corners of a jagged raster (level sets, small glyphs) are often turns that
+    one cubic follows within the tolerance; those at a straight side (a line piece at
+    least ``2 * CORNER_SCALE`` long, the span of the corner test) stay crisp.
+    """
+    n = len(pts)
+    flags = chain.lines or [False] * len(chain.fits)
+    sides = [k for k, c in enumerate(chain.curves) if flags[k] and np.linalg.norm(c[3] - c[0]) >= 2 * CORNER_SCALE]
+    joins = {j for k in sides for j in (k, (k + 1) % len(chain.fits))} & set(chain.corners)
+    hard = np.unique((offset + chain.breaks[sorted(joins)]) % n)
+    if hard.size:
+        free, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners)
+    else:
+        free, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
+    return (free, at) if len(free.fits) < len(chain.fits) else (chain, offset)
 
 
 def _fit_symmetric(
