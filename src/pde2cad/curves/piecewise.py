@@ -398,7 +398,7 @@ def fit_chain(
 #: Shared join tangents tried per sweep, as blends ``(1 - w) a + w b`` of the two C0
 #: pieces' own tangents ``a`` (ending) and ``b`` (starting) there; w outside [0, 1] turns
 #: past both.
-_BLENDS = np.array([-0.5, -0.25, 0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5])
+_BLENDS = np.array([-0.5, 0.0, 0.5, 1.0, 1.5])
 _SWEEPS = 2
 
 
@@ -429,10 +429,14 @@ def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end, sharp_ok: NDArra
         return None
     theta[cusp] = np.nan
     for _ in range(_SWEEPS):
+        settled = True
         for parity in (1, 0):
             joins = np.arange(1, k)[np.arange(1, k) % 2 == parity]
             if joins.size:
-                theta[joins - 1] = _best_tangents(fitter, c0, theta, joins, a, b, tan_start, tan_end, kink)
+                theta[joins - 1], found = _best_tangents(fitter, c0, theta, joins, a, b, tan_start, tan_end, kink)
+                settled &= bool(found.all())
+        if settled:  # every join found a passing tangent: the final refit checks them together
+            break
     fits = _fit_pieces(fitter, c0, theta, np.arange(k), None, None, tan_start, tan_end, fitter.all_names)
     if not all(good for _, good in fits):
         return None
@@ -463,7 +467,7 @@ def _kinks(points: NDArray[np.float64], at: NDArray[np.int64], reach: int) -> ND
 def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start, tan_end, kink):
     """For each join (1..k-1) in ``joins``, the blend tangent that lets both its pieces pass
     with the least maximum error; where none passes, free tangents (NaN) at a kink, else
-    the current one."""
+    the current one. Also returns which joins found a passing tangent."""
     m = len(_BLENDS)
     cand = _unit_rows(((1.0 - _BLENDS)[None, :, None] * a[joins - 1, None] + _BLENDS[None, :, None] * b[joins - 1, None]).reshape(-1, a.shape[1]))
     rep = np.repeat(joins, m)
@@ -476,7 +480,7 @@ def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start,
     found = np.isfinite(err[np.arange(len(joins)), pick])
     new = cand.reshape(-1, m, a.shape[1])[np.arange(len(joins)), pick]
     keep = np.where(kink[joins - 1, None], np.nan, theta[joins - 1])
-    return np.where(found[:, None], new, keep)
+    return np.where(found[:, None], new, keep), found
 
 
 def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan, tan_start, tan_end, names=None):

@@ -21,6 +21,7 @@ from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
     SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed, fit_closed_free,
+    line_chain,
 )
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
@@ -250,9 +251,12 @@ def _fit_loop(
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
-    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
-    if g1 and len(chain.fits) > 1:
-        chain, offset = _soft_corner_fit(pts, corners, chain, offset, tol, method, deadline)
+    hard = _straight_side_corners(pts, corners, tol) if g1 else corners
+    if hard.size or not corners.size:
+        chain, offset = fit_closed(pts, tol, corners=hard, g1=g1, method=method, deadline=deadline,
+                                   soft_corners=corners if g1 else None)
+    else:  # corners, none of them at a straight side: all are allowed breaks only
+        chain, offset = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
     # Straight sides are lines spanning both chords of the corner test (see merge_closed).
     chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
                             method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
@@ -284,24 +288,20 @@ def _fit_loop(
     )
 
 
-def _soft_corner_fit(pts, corners, chain: ChainFit, offset: int, tol: float, method: str, deadline):
-    """The loop refitted with only the corners at straight sides as forced breaks (the
-    others allowed C0 joins), when that takes fewer pieces than ``chain``.
-
-    Detected corners of a jagged raster (level sets, small glyphs) are often turns that
-    one cubic follows within the tolerance; those at a straight side (a line piece at
-    least ``2 * CORNER_SCALE`` long, the span of the corner test) stay crisp.
-    """
+def _straight_side_corners(pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float) -> NDArray[np.int64]:
+    """The corners at either end of a straight side: a run between consecutive corners at
+    least ``2 * CORNER_SCALE`` long (the span of the corner test) whose points lie within
+    the tolerance of its chord. Those stay crisp; the other corners of a jagged raster
+    (level sets, small glyphs) are often turns one cubic follows within the tolerance."""
     n = len(pts)
-    flags = chain.lines or [False] * len(chain.fits)
-    sides = [k for k, c in enumerate(chain.curves) if flags[k] and np.linalg.norm(c[3] - c[0]) >= 2 * CORNER_SCALE]
-    joins = {j for k in sides for j in (k, (k + 1) % len(chain.fits))} & set(chain.corners)
-    hard = np.unique((offset + chain.breaks[sorted(joins)]) % n)
-    if hard.size:
-        free, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners)
-    else:
-        free, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
-    return (free, at) if len(free.fits) < len(chain.fits) else (chain, offset)
+    if len(corners) < 2:
+        return np.arange(0)
+    hard = []
+    for a, b in zip(corners, np.r_[corners[1:], corners[0] + n]):
+        run = pts[np.arange(a, b + 1) % n]
+        if np.linalg.norm(run[-1] - run[0]) >= 2 * CORNER_SCALE and line_chain(run, run[0], run[-1], tol) is not None:
+            hard.extend((int(a), int(b) % n))
+    return np.unique(np.asarray(hard, dtype=np.int64))
 
 
 def _fit_symmetric(
