@@ -329,6 +329,12 @@ def fit_chain(
         joined = g1_joins(fitter, c0, tan_start, tan_end, kinks) if c0.ok else None
         if joined is not None:
             return joined
+        if corner_points is not None and np.any(corner_points[1:-1]):
+            # No G1 fit at the C0 breaks: the corners become forced breaks after all.
+            return _split_at_corners(pts, tolerance, np.flatnonzero(corner_points[1:-1]) + 1, dict(
+                p_start=p_start, p_end=p_end, tan_start=tan_start, tan_end=tan_end, param_points=ppts,
+                join_tangents=join_tangents, method=method, rounds=rounds, c0_fallback=c0_fallback,
+                deadline=deadline, edge_midpoints=edge_midpoints))
     end = len(pts) - 1
     start = 0
     first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
@@ -511,6 +517,33 @@ def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan
             )
             for i, r in zip(sel, res):
                 out[i] = r
+    return out
+
+
+def _split_at_corners(pts: NDArray[np.float64], tolerance: float, cuts: NDArray[np.int64], kw: dict) -> ChainFit:
+    """:func:`fit_chain` of each run between the ``cuts`` (C0 joins there), joined in order.
+
+    ``kw`` holds the whole run's options; end points and tangents apply to its ends only,
+    per-point arrays are sliced."""
+    bounds = np.r_[0, cuts, len(pts) - 1]
+    curves, fits, breaks, corners, flags, ok = [], [], [0], [], [], True
+    for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+        first, last = j == 0, j == len(bounds) - 2
+        part = {key: (v[a : b + 1] if isinstance(v, np.ndarray) and v.ndim == 2 and len(v) == len(pts) else v)
+                for key, v in kw.items()}
+        part.update(p_start=kw["p_start"] if first else None, p_end=kw["p_end"] if last else None,
+                    tan_start=kw["tan_start"] if first else None, tan_end=kw["tan_end"] if last else None)
+        chain = fit_chain(pts[a : b + 1], tolerance, g1=True, **part)
+        if not first:
+            corners.append(len(fits))
+        corners.extend(len(fits) + c for c in chain.corners if c != 0)
+        curves.append(chain.curves)
+        fits.extend(chain.fits)
+        flags.extend(chain.lines or [False] * len(chain.fits))
+        breaks.extend(int(a) + chain.breaks[1:])
+        ok = ok and chain.ok
+    out = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), corners, ok)
+    out.lines = flags if any(flags) else []
     return out
 
 
