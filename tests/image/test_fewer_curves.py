@@ -36,22 +36,16 @@ def _level_set() -> np.ndarray:
 
 
 def _despeckled(mask: np.ndarray, area: int = 2) -> np.ndarray:
-    """The mask without what vectorize drops by default: shapes (8-connected) and holes
-    (4-connected) of at most ``area`` pixels, found independently with scipy.ndimage."""
-    from scipy import ndimage
+    """The mask without what vectorize drops by default, by the benchmark's independent
+    scipy.ndimage code (shapes and holes of at most ``area`` pixels)."""
+    import importlib.util
 
-    out = mask.copy()
-    for fg in (True, False):
-        region = out if fg else ~np.pad(out, 1)
-        lab, _ = ndimage.label(region, structure=np.ones((3, 3), bool) if fg else None)
-        small = np.bincount(lab.ravel()) <= area
-        small[0] = False
-        hit = small[lab]
-        if fg:
-            out[hit] = False
-        else:
-            out[hit[1:-1, 1:-1]] = True
-    return out
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "vectorize_vs_potrace.py"
+    spec = importlib.util.spec_from_file_location("vectorize_vs_potrace", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.despeckled(mask, area)
 
 
 def _join_angles(curves: np.ndarray) -> np.ndarray:
