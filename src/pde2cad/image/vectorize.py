@@ -251,12 +251,17 @@ def _fit_loop(
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
+    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
     hard = _straight_side_corners(pts, corners, tol) if g1 else corners
-    if hard.size or not corners.size:
-        chain, offset = fit_closed(pts, tol, corners=hard, g1=g1, method=method, deadline=deadline,
-                                   soft_corners=corners if g1 else None)
-    else:  # corners, none of them at a straight side: all are allowed breaks only
-        chain, offset = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
+    if len(hard) < len(corners) and len(chain.fits) > 1:
+        # Fewer forced breaks; kept only where it saves pieces (on noisy outlines the
+        # corners-forced fit can be far cheaper).
+        if hard.size:
+            soft, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners)
+        else:
+            soft, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
+        if len(soft.fits) < len(chain.fits):
+            chain, offset = soft, at
     # Straight sides are lines spanning both chords of the corner test (see merge_closed).
     chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
                             method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
