@@ -132,12 +132,7 @@ class _Fitter:
     def fit_many(
         self, i: int, stops: NDArray[np.int64], p0, p3s, tan0, tan3s, names: list[str] | None = None
     ) -> list[tuple[CubicFit, bool]]:
-        """Fit points[i..stop] for every stop at once, each with every parameterization.
-
-        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
-        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
-        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
-        5. per candidate keep the best fit: passing first, then the least maximum error.
+        """Fit points[i..stop] for every stop at once (:meth:`fit_spans` from one start).
 
         Parameters
         ----------
@@ -147,20 +142,44 @@ class _Fitter:
         tan3s : (m, D) float or None
             End tangent of each candidate.
         """
+        stops = np.asarray(stops, dtype=np.int64)
+        m = len(stops)
+        p0s = np.broadcast_to(np.asarray(p0, dtype=float), (m, self.points.shape[1]))
+        tan0s = None if tan0 is None else np.broadcast_to(np.asarray(_unit(tan0), dtype=float), p0s.shape)
+        return self.fit_spans(np.full(m, i, dtype=np.int64), stops, p0s, p3s, tan0s, tan3s, names)
+
+    def fit_spans(
+        self, starts: NDArray[np.int64], stops: NDArray[np.int64], p0s, p3s, tan0s, tan3s,
+        names: list[str] | None = None,
+    ) -> list[tuple[CubicFit, bool]]:
+        """Fit points[start..stop] for every span at once, each with every parameterization.
+
+        Steps: 1. pad the candidate runs into one batch (candidates x parameterizations);
+        2. fit them all (:func:`pde2cad.curves.batchfit.fit_batch`); 3. minimax-refine those
+        just over the tolerance; 4. test (point errors and curve-to-polyline distance);
+        5. per candidate keep the best fit: passing first, then the least maximum error.
+
+        Parameters
+        ----------
+        starts, stops : (m,) int, stops > starts
+        p0s, p3s : (m, D) float
+            End points of each candidate.
+        tan0s, tan3s : (m, D) float or None
+            End tangents of each candidate (None: free at that end, for all candidates).
+        """
         names = self.names if names is None else names
+        starts = np.asarray(starts, dtype=np.int64)
         stops = np.asarray(stops, dtype=np.int64)
         m, nm = len(stops), len(names)
-        lengths = stops - i + 1
-        rows = np.minimum(i + np.arange(int(lengths.max()))[None, :], stops[:, None])
+        lengths = stops - starts + 1
+        rows = np.minimum(starts[:, None] + np.arange(int(lengths.max()))[None, :], stops[:, None])
         pts = np.tile(self.points[rows], (nm, 1, 1))
         valid = np.tile(np.arange(rows.shape[1])[None, :] < lengths[:, None], (nm, 1))
         ppts = self.param_points[rows]
         t = np.concatenate([batchfit.parameters(name, ppts, lengths) for name in names])
-        dim = pts.shape[2]
         batch = batchfit.Batch(
-            pts, valid,
-            np.broadcast_to(np.asarray(p0, dtype=float), (m * nm, dim)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
-            None if tan0 is None else np.broadcast_to(np.asarray(_unit(tan0), dtype=float), (m * nm, dim)),
+            pts, valid, np.tile(np.asarray(p0s, dtype=float), (nm, 1)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
+            None if tan0s is None else np.tile(_unit_rows(tan0s), (nm, 1)),
             None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
         )
         ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
@@ -226,6 +245,9 @@ def fit_chain(
     max_pieces: int | None = None,
     deadline: float | None = None,
     edge_midpoints: bool = False,
+    free_joins: bool = True,
+    prefer_breaks: NDArray[np.bool_] | None = None,
+    corner_points: NDArray[np.bool_] | None = None,
 ) -> ChainFit:
     """Fit an open run of ordered points with the fewest cubics within ``tolerance``.
 
@@ -265,6 +287,17 @@ def fit_chain(
     edge_midpoints : bool
         Also hold the tolerance at the midpoints between consecutive points (pixel
         boundaries: the middle of a 1-px tip edge can be farther than both its ends).
+    free_joins : bool
+        With ``g1``, first place the breaks as C0 pieces reach and fit each join's tangent
+        as a free unknown shared by both pieces (:func:`g1_joins`); only where that fails,
+        search breaks with the tangents of ``join_tangents`` fixed. A G1 join then costs
+        no extra curve wherever a G1 fit exists at the C0 breaks.
+    prefer_breaks : (n,) bool, optional
+        C0 joins only: a break that is not on such a point moves back to the last one in
+        the final third of its piece, where one passes.
+    corner_points : (n,) bool, optional
+        With ``free_joins``: points where a join may stay C0 besides the kinks (detected
+        corners).
 
     Returns
     -------
@@ -284,6 +317,24 @@ def fit_chain(
     else:
         joins, jtan = pts, None
     fitter = _Fitter(pts, tolerance, ppts, method, rounds, edge_midpoints)
+    if g1 and free_joins:
+        # Breaks where C0 pieces reach, then one shared tangent per join (see g1_joins).
+        # C0 breaks go to kinks where they can (those joins may stay C0).
+        kinks = _kinks(pts, np.arange(len(pts)), kink_reach(tolerance))
+        if corner_points is not None:
+            kinks |= np.asarray(corner_points, dtype=bool)
+        c0 = fit_chain(pts, tolerance, p_start=p_start, p_end=p_end, tan_start=tan_start, tan_end=tan_end,
+                       g1=False, param_points=ppts, method=method, rounds=rounds, max_pieces=max_pieces,
+                       deadline=deadline, edge_midpoints=edge_midpoints, prefer_breaks=kinks)
+        joined = g1_joins(fitter, c0, tan_start, tan_end, kinks) if c0.ok else None
+        if joined is not None:
+            return joined
+        if corner_points is not None and np.any(corner_points[1:-1]):
+            # No G1 fit at the C0 breaks: the corners become forced breaks after all.
+            return _split_at_corners(pts, tolerance, np.flatnonzero(corner_points[1:-1]) + 1, dict(
+                p_start=p_start, p_end=p_end, tan_start=tan_start, tan_end=tan_end, param_points=ppts,
+                join_tangents=join_tangents, method=method, rounds=rounds, c0_fallback=c0_fallback,
+                deadline=deadline, edge_midpoints=edge_midpoints))
     end = len(pts) - 1
     start = 0
     first_p = pts[0] if p_start is None else np.asarray(p_start, dtype=float)
@@ -304,6 +355,8 @@ def fit_chain(
             stop = end
         else:
             stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+        if stop < end and prefer_breaks is not None and not prefer_breaks[stop]:
+            stop, fit, ok = _snap_to_kink(fitter, start, stop, fit, ok, p0, tan, joins, prefer_breaks)
         if stop < end and end - stop < MIN_POINTS - 1:
             # Leave the last piece enough points to be determined, if a slightly shorter
             # piece still passes (fit-ability is only nearly monotone in the length).
@@ -346,6 +399,164 @@ def fit_chain(
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
     return chain
+
+
+#: Shared join tangents tried per sweep, as blends ``(1 - w) a + w b`` of the two C0
+#: pieces' own tangents ``a`` (ending) and ``b`` (starting) there; w outside [0, 1] turns
+#: past both.
+_BLENDS = np.array([-0.5, 0.0, 0.5, 1.0, 1.5])
+_SWEEPS = 2
+
+
+def g1_joins(fitter: _Fitter, c0: ChainFit, tan_start, tan_end, sharp_ok: NDArray[np.bool_]) -> ChainFit | None:
+    """Make the interior joins of a C0 chain G1 at the same break points, or None.
+
+    The tangent at each join is a free unknown shared by the two pieces there. A join
+    stays C0 only where ``sharp_ok`` (per point) allows it and no G1 tangent passes:
+    detected corners, and kinks where the points turn by :data:`KINK_ANGLE` or more within
+    twice the tolerance on either side (a corner at the tolerance's scale, such as the
+    steps of an upscaled staircase).
+    Steps: 1. start each join from the mean of its two C0 tangents; 2. red-black sweeps:
+    for all odd joins at once (then all even ones), refit both neighbouring pieces for
+    every tangent of :data:`_BLENDS` (the other ends held) and keep the tangent that passes
+    with the least error (a kink with none keeps C0: free tangents); 3. refit every piece
+    with the final tangents and all parameterizations; None unless every piece passes.
+    """
+    k = len(c0.fits)
+    if k < 2:
+        return c0
+    curves, breaks = c0.curves, c0.breaks
+    a = np.array([end_tangent(c) if end_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[:-1]])
+    b = np.array([start_tangent(c) if start_tangent(c) is not None else np.zeros(curves.shape[2]) for c in curves[1:]])
+    theta = _unit_rows(a + b)  # (k - 1,) joins 1..k-1
+    kink = sharp_ok[breaks[1:-1]]
+    cusp = np.linalg.norm(theta, axis=1) < 0.5  # the pieces leave the join in opposite directions
+    if np.any(cusp & ~kink):
+        return None
+    theta[cusp] = np.nan
+    for _ in range(_SWEEPS):
+        settled = True
+        for parity in (1, 0):
+            joins = np.arange(1, k)[np.arange(1, k) % 2 == parity]
+            if joins.size:
+                theta[joins - 1], found = _best_tangents(fitter, c0, theta, joins, a, b, tan_start, tan_end, kink)
+                settled &= bool(found.all())
+        if settled:  # every join found a passing tangent: the final refit checks them together
+            break
+    fits = _fit_pieces(fitter, c0, theta, np.arange(k), None, None, tan_start, tan_end, fitter.all_names)
+    if not all(good for _, good in fits):
+        return None
+    sharp = [int(j) for j in np.flatnonzero(np.isnan(theta[:, 0])) + 1]
+    return ChainFit(np.stack([f.ctrl for f, _ in fits]), [f for f, _ in fits], breaks.copy(), sharp, True)
+
+
+#: Turn (degrees) of the points within twice the tolerance either side of a join above
+#: which the join may stay C0 (the corner angle of :mod:`pde2cad.image.corners`).
+KINK_ANGLE = 50.0
+
+
+def kink_reach(tolerance: float) -> int:
+    """Points either side over which a kink is measured: twice the tolerance, at least 2."""
+    return max(2, int(round(2.0 * tolerance)))
+
+
+def _kinks(points: NDArray[np.float64], at: NDArray[np.int64], reach: int) -> NDArray[np.bool_]:
+    """Per index in ``at``: the chords to the points ``reach`` back and ahead turn by at
+    least :data:`KINK_ANGLE` (ends clipped to the run)."""
+    n = len(points)
+    u = points[at] - points[np.maximum(at - reach, 0)]
+    v = points[np.minimum(at + reach, n - 1)] - points[at]
+    cos = (u * v).sum(axis=1) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-12)
+    return cos <= np.cos(np.radians(KINK_ANGLE))
+
+
+def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start, tan_end, kink):
+    """For each join (1..k-1) in ``joins``, the blend tangent that lets both its pieces pass
+    with the least maximum error; where none passes, free tangents (NaN) at a kink, else
+    the current one. Also returns which joins found a passing tangent."""
+    m = len(_BLENDS)
+    cand = _unit_rows(((1.0 - _BLENDS)[None, :, None] * a[joins - 1, None] + _BLENDS[None, :, None] * b[joins - 1, None]).reshape(-1, a.shape[1]))
+    rep = np.repeat(joins, m)
+    left = _fit_pieces(fitter, c0, theta, rep - 1, None, cand, tan_start, tan_end)
+    right = _fit_pieces(fitter, c0, theta, rep, cand, None, tan_start, tan_end)
+    err = np.array([max(fl.max_error, fr.max_error) for (fl, _), (fr, _) in zip(left, right)])
+    good = np.array([gl and gr for (_, gl), (_, gr) in zip(left, right)])
+    err = np.where(good & (np.linalg.norm(cand, axis=1) > 0.5), err, np.inf).reshape(-1, m)
+    pick = np.argmin(err, axis=1)
+    found = np.isfinite(err[np.arange(len(joins)), pick])
+    new = cand.reshape(-1, m, a.shape[1])[np.arange(len(joins)), pick]
+    keep = np.where(kink[joins - 1, None], np.nan, theta[joins - 1])
+    return np.where(found[:, None], new, keep), found
+
+
+def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan, tan_start, tan_end, names=None):
+    """Fit C0 chain pieces at their break points with join tangents ``theta`` (joins 1..k-1)
+    or the overrides ``start_tan`` / ``end_tan`` (one row per piece); chain ends keep
+    ``tan_start`` / ``tan_end`` (None: free). Batched per kind of end constraint."""
+    k = len(c0.fits)
+    dim = c0.curves.shape[2]
+    t0 = [None if j == 0 and tan_start is None else (np.asarray(tan_start, float) if j == 0 else theta[j - 1]) for j in pieces]
+    t3 = [None if j == k - 1 and tan_end is None else (np.asarray(tan_end, float) if j == k - 1 else theta[j]) for j in pieces]
+    if start_tan is not None:
+        t0 = list(start_tan)
+    if end_tan is not None:
+        t3 = list(end_tan)
+    t0 = [None if v is None or np.isnan(v[0]) else v for v in t0]  # NaN: a C0 join, free
+    t3 = [None if v is None or np.isnan(v[0]) else v for v in t3]
+    out: list[tuple[CubicFit, bool] | None] = [None] * len(pieces)
+    for has0 in (False, True):
+        for has3 in (False, True):
+            sel = [i for i in range(len(pieces)) if (t0[i] is not None) == has0 and (t3[i] is not None) == has3]
+            if not sel:
+                continue
+            js = np.asarray(pieces)[sel]
+            res = fitter.fit_spans(
+                c0.breaks[js], c0.breaks[js + 1], c0.curves[js, 0], c0.curves[js, 3],
+                np.stack([t0[i] for i in sel]).reshape(-1, dim) if has0 else None,
+                np.stack([t3[i] for i in sel]).reshape(-1, dim) if has3 else None, names,
+            )
+            for i, r in zip(sel, res):
+                out[i] = r
+    return out
+
+
+def _split_at_corners(pts: NDArray[np.float64], tolerance: float, cuts: NDArray[np.int64], kw: dict) -> ChainFit:
+    """:func:`fit_chain` of each run between the ``cuts`` (C0 joins there), joined in order.
+
+    ``kw`` holds the whole run's options; end points and tangents apply to its ends only,
+    per-point arrays are sliced."""
+    bounds = np.r_[0, cuts, len(pts) - 1]
+    curves, fits, breaks, corners, flags, ok = [], [], [0], [], [], True
+    for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+        first, last = j == 0, j == len(bounds) - 2
+        part = {key: (v[a : b + 1] if isinstance(v, np.ndarray) and v.ndim == 2 and len(v) == len(pts) else v)
+                for key, v in kw.items()}
+        part.update(p_start=kw["p_start"] if first else None, p_end=kw["p_end"] if last else None,
+                    tan_start=kw["tan_start"] if first else None, tan_end=kw["tan_end"] if last else None)
+        chain = fit_chain(pts[a : b + 1], tolerance, g1=True, **part)
+        if not first:
+            corners.append(len(fits))
+        corners.extend(len(fits) + c for c in chain.corners if c != 0)
+        curves.append(chain.curves)
+        fits.extend(chain.fits)
+        flags.extend(chain.lines or [False] * len(chain.fits))
+        breaks.extend(int(a) + chain.breaks[1:])
+        ok = ok and chain.ok
+    out = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), corners, ok)
+    out.lines = flags if any(flags) else []
+    return out
+
+
+def _snap_to_kink(fitter: _Fitter, start: int, stop: int, fit: CubicFit, ok: bool, p0, tan, joins, prefer):
+    """The piece start..stop moved back to end on the last preferred point in its final
+    third, when that shorter piece passes; else the piece as it was."""
+    lo = start + max(MIN_POINTS - 1, (2 * (stop - start)) // 3)
+    cand = np.flatnonzero(prefer[lo:stop]) + lo
+    if not ok or not cand.size:
+        return stop, fit, ok
+    c = int(cand[-1])
+    new, good = _test(fitter, start, [c], p0, tan, joins[c][None], None)[0]
+    return (c, new, True) if good else (stop, fit, ok)
 
 
 def _test(fitter: _Fitter, start: int, stops, p0, tan, p3s, tan3s) -> list[tuple[CubicFit, bool]]:
@@ -468,6 +679,7 @@ def fit_closed(
     sharpen: bool = True,
     deadline: float | None = None,
     lines: bool = True,
+    soft_corners: NDArray[np.int64] | None = None,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -495,6 +707,9 @@ def fit_closed(
         See :func:`fit_chain`.
     lines : bool
         Straight runs become line segments (:func:`line_chain`, :func:`straighten`).
+    soft_corners : (s,) int, optional
+        Points where joins inside a run may stay C0 (corners that are not forced breaks;
+        see :func:`fit_chain`'s ``corner_points``).
 
     Returns
     -------
@@ -539,6 +754,10 @@ def fit_closed(
     offset = int(cidx[0])
     ring = np.r_[offset:n, 0 : offset + 1]
     closed = pts[ring]
+    soft = None
+    if soft_corners is not None:
+        soft = np.zeros(n, bool)
+        soft[np.asarray(soft_corners, dtype=np.int64) % n] = True
     cuts = np.concatenate([cidx - offset, [n]])
     tips = corner_positions(pts, cidx, max_shift=0.75 * tolerance) if sharpen else pts[cidx]
     tips = np.vstack([tips, tips[:1]])
@@ -552,7 +771,7 @@ def fit_closed(
         if chain is None:
             chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
                               param_points=pos, join_tangents=tan, method=method, deadline=deadline,
-                              edge_midpoints=True)
+                              edge_midpoints=True, corner_points=None if soft is None else soft[ring][a : b + 1])
             chain = straighten(chain, run, tolerance) if lines else chain
         flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))
@@ -563,6 +782,50 @@ def fit_closed(
     chain = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list)))
     chain.lines = flags
     return chain, offset
+
+
+def fit_closed_free(
+    points: NDArray[np.float64],
+    tolerance: float,
+    *,
+    corners: NDArray[np.int64] | None = None,
+    method: str = "optimal",
+    deadline: float | None = None,
+) -> tuple[ChainFit, int]:
+    """Fit a closed loop with breaks wherever C0 pieces reach and G1 joins made on them.
+
+    Unlike :func:`fit_closed`, the detected corners are not forced breaks, only places
+    where a join may stay C0 (as may kinks, see :func:`g1_joins`), so a loop whose
+    "corners" are raster noise costs what a plain least-squares fitter would.
+    Steps: 1. open the loop at its first corner or kink (C0 closing join), else at its
+    sharpest turn with the denoised tangent there (G1 closing join); 2. fit the run with
+    :func:`fit_chain` (``free_joins``); 3. make pieces straight where their chord fits.
+
+    Returns
+    -------
+    (ChainFit, offset)
+        As :func:`fit_closed`.
+    """
+    pts = np.asarray(points, dtype=float)
+    n = len(pts)
+    pos, tan = denoise(pts, closed=True)
+    loop3 = np.vstack([pts, pts, pts])
+    allowed = _kinks(loop3, n + np.arange(n), min(kink_reach(tolerance), max(1, n // 4)))
+    cidx = np.asarray(corners, dtype=np.int64) % n if corners is not None and len(corners) else np.arange(0)
+    allowed[cidx] = True
+    if allowed.any():
+        offset = int(cidx[0]) if cidx.size else int(np.flatnonzero(allowed)[0])
+        t_end = None
+    else:
+        offset = _max_curvature_index(pos)
+        t_end = tan[offset]
+    ring = np.r_[offset:n, 0 : offset + 1]
+    chain = fit_chain(pts[ring], tolerance, tan_start=t_end, tan_end=t_end, g1=True, param_points=pos[ring],
+                      join_tangents=tan[ring], method=method, deadline=deadline, edge_midpoints=True,
+                      corner_points=allowed[ring])
+    if t_end is None or len(chain.fits) == 1:
+        chain.corners = sorted(set(chain.corners) | {0})
+    return straighten(chain, pts[ring], tolerance, closed=True), offset
 
 
 def _segment_distance(points: NDArray[np.float64], p0: NDArray[np.float64], p3: NDArray[np.float64]):
@@ -589,17 +852,21 @@ def line_chain(points, p0, p3, tolerance: float) -> ChainFit | None:
     return chain
 
 
-def straighten(chain: ChainFit, points: NDArray[np.float64], tolerance: float) -> ChainFit:
+def straighten(
+    chain: ChainFit, points: NDArray[np.float64], tolerance: float, closed: bool = False
+) -> ChainFit:
     """Make every piece whose points lie within the tolerance of its chord a straight line.
 
     A least-squares cubic over a straight pixel edge bulges gently within the tolerance; its
     chord has the same end points and follows the edge. At a G1 join (not in
     ``chain.corners``; the chain's own ends count as corners) the chord may turn at most
     :data:`LINE_KINK` degrees from the join tangent, so a short chord of a round arc never
-    puts a corner into a smooth outline.
+    puts a corner into a smooth outline. With ``closed`` the chain's ends meet at a join,
+    sharp only when 0 is in ``chain.corners``.
     """
     lines = list(chain.lines) or [False] * len(chain.fits)
-    sharp = set(chain.corners) | {0, len(chain.fits)}
+    ends = {0, len(chain.fits)} if not closed or 0 in chain.corners else set()
+    sharp = set(chain.corners) | ends
     cos_kink = np.cos(np.radians(LINE_KINK))
     for k, (a, b) in enumerate(zip(chain.breaks[:-1], chain.breaks[1:])):
         if lines[k]:

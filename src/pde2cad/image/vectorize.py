@@ -17,13 +17,15 @@ from numpy.typing import NDArray
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import nearest, points_to_curves
 from pde2cad.curves.fit import CubicFit
+from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
-    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed,
+    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed, fit_closed_free,
+    line_chain,
 )
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
-from pde2cad.image.corners import CORNER_ANGLE, detect_corners
+from pde2cad.image.corners import CORNER_ANGLE, CORNER_SCALE, detect_corners
 from pde2cad.image.drawing import Drawing, OutlineLoop
 from pde2cad.image.raster import read_image, to_mask
 
@@ -261,7 +263,20 @@ def _fit_loop(
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
     begun = time.perf_counter()
-    chain, _ = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
+    hard = _straight_side_corners(pts, corners, tol) if g1 else corners
+    if len(hard) < len(corners) and len(chain.fits) > 1:
+        # Fewer forced breaks; kept only where it saves pieces (on noisy outlines the
+        # corners-forced fit can be far cheaper).
+        if hard.size:
+            soft, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners)
+        else:
+            soft, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
+        if len(soft.fits) < len(chain.fits):
+            chain, offset = soft, at
+    # Straight sides are lines spanning both chords of the corner test (see merge_closed).
+    chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
+                            method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
     plain_s = time.perf_counter() - begun
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
@@ -393,6 +408,22 @@ def _search_symmetric(
         if deadline is not None and time.perf_counter() > deadline:
             raise
         return None
+
+
+def _straight_side_corners(pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float) -> NDArray[np.int64]:
+    """The corners at either end of a straight side: a run between consecutive corners at
+    least ``2 * CORNER_SCALE`` long (the span of the corner test) whose points lie within
+    the tolerance of its chord. Those stay crisp; the other corners of a jagged raster
+    (level sets, small glyphs) are often turns one cubic follows within the tolerance."""
+    n = len(pts)
+    if len(corners) < 2:
+        return np.arange(0)
+    hard = []
+    for a, b in zip(corners, np.r_[corners[1:], corners[0] + n]):
+        run = pts[np.arange(a, b + 1) % n]
+        if np.linalg.norm(run[-1] - run[0]) >= 2 * CORNER_SCALE and line_chain(run, run[0], run[-1], tol) is not None:
+            hard.extend((int(a), int(b) % n))
+    return np.unique(np.asarray(hard, dtype=np.int64))
 
 
 def _fit_symmetric(
