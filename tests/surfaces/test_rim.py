@@ -87,7 +87,7 @@ def test_rim_estimate_does_not_depend_on_scale_or_position() -> None:
     rotation = np.linalg.qr(np.random.default_rng(5).standard_normal((3, 3)))[0]
     scale, shift = 1e-3, np.array([1e4, -3e3, 5e2])
     moved = points @ rotation.T * scale + shift
-    a, b = extract_boundary(points), extract_boundary(moved)
+    a, b = extract_boundary(points, rims=True), extract_boundary(moved, rims=True)
     # The same loop of sides (corner 0 depends on the PCA frame's orientation, so compare
     # the sampled boundaries as point sets). Measured: mean 0.015 spacings, max 0.11 (where
     # the side fitter splits a side into pieces differently: a discrete choice).
@@ -104,7 +104,7 @@ def test_rim_estimate_does_not_depend_on_scale_or_position() -> None:
 def test_flag_patch_reaches_its_rim(count: int) -> None:
     points, diagonal = _flag_cloud(count)
     spacing = sample_spacing(points)
-    patch = fit_patch(points, m="auto", n="auto")
+    patch = fit_patch(points, m="auto", n="auto", boundary=extract_boundary(points, rims=True))
     # Issue 13.3: <= 1e-4 D (2.1e-4 with sides on the boundary loop; measured here 1.6e-5 at
     # 10k, 8.6e-6 at 50k; 9.3e-5 and 4.8e-5 with the loop sides).
     assert _truth_to_patch(patch) <= 3e-5 * diagonal
@@ -118,7 +118,7 @@ def test_flag_patch_reaches_its_rim(count: int) -> None:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_noisy_flag_rim_is_on_the_true_rim(seed: int) -> None:
     points, diagonal = _flag_cloud(50_000, noise=0.002, seed=seed)
-    rim_sides = extract_boundary(points)
+    rim_sides = extract_boundary(points, rims=True)
     loop_sides = extract_boundary(points, rims=False)
     rim = _rim_distance(rim_sides.sides)
     # Measured (seeds 0 / 1): mean 4.6e-4 / 2.0e-4 D (loop sides 5.5e-4 / 4.6e-4).
@@ -135,8 +135,10 @@ def test_rotated_shifted_flag_fits_as_well() -> None:
     points, diagonal = _flag_cloud(20_000, seed=2)
     rotation = np.linalg.qr(np.random.default_rng(9).standard_normal((3, 3)))[0]
     scale, shift = 250.0, np.array([-4e5, 2e5, 7e4])
-    patch = fit_patch(points @ rotation.T * scale + shift, m="auto", n="auto")
-    plain = fit_patch(points, m="auto", n="auto")
+    moved_points = points @ rotation.T * scale + shift
+    patch = fit_patch(moved_points, m="auto", n="auto",
+                      boundary=extract_boundary(moved_points, rims=True))
+    plain = fit_patch(points, m="auto", n="auto", boundary=extract_boundary(points, rims=True))
     moved = _truth_to_patch(patch, (rotation, scale, shift))
     assert moved <= 3e-5 * diagonal
     assert moved == pytest.approx(_truth_to_patch(plain), rel=0.05)
@@ -148,7 +150,7 @@ def test_straight_rims_become_lines() -> None:
     xy = rng.random((20_000, 2)) * [80.0, 50.0]
     rotation = np.linalg.qr(rng.standard_normal((3, 3)))[0]
     plate = np.c_[xy, np.zeros(len(xy))] @ rotation.T + [3.0, -7.0, 11.0]
-    rb = extract_boundary(plate)
+    rb = extract_boundary(plate, rims=True)
     spacing = sample_spacing(plate)
     lines = 0
     for side in rb.sides:

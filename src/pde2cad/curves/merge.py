@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import time
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -215,7 +217,7 @@ def _apply(found, starts, lengths, sharp, fits, curves, flags, n: int):
     k = len(starts)
     merged = dict(found)
     drop = {(j + 1) % k for j in merged}
-    new = ([], [], [], [], [], [])
+    new: tuple[list[Any], ...] = ([], [], [], [], [], [])
     for j in range(k):
         if j in drop:
             continue

@@ -14,6 +14,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -512,24 +514,29 @@ def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan
             js = np.asarray(pieces)[sel]
             res = fitter.fit_spans(
                 c0.breaks[js], c0.breaks[js + 1], c0.curves[js, 0], c0.curves[js, 3],
-                np.stack([t0[i] for i in sel]).reshape(-1, dim) if has0 else None,
-                np.stack([t3[i] for i in sel]).reshape(-1, dim) if has3 else None, names,
+                np.stack([np.asarray(t0[i]) for i in sel]).reshape(-1, dim) if has0 else None,
+                np.stack([np.asarray(t3[i]) for i in sel]).reshape(-1, dim) if has3 else None, names,
             )
             for i, r in zip(sel, res):
                 out[i] = r
     return out
 
 
-def _split_at_corners(pts: NDArray[np.float64], tolerance: float, cuts: NDArray[np.int64], kw: dict) -> ChainFit:
+def _split_at_corners(pts: NDArray[np.float64], tolerance: float, cuts: NDArray[np.int64], kw: dict[str, Any]) -> ChainFit:
     """:func:`fit_chain` of each run between the ``cuts`` (C0 joins there), joined in order.
 
     ``kw`` holds the whole run's options; end points and tangents apply to its ends only,
     per-point arrays are sliced."""
     bounds = np.r_[0, cuts, len(pts) - 1]
-    curves, fits, breaks, corners, flags, ok = [], [], [0], [], [], True
+    curves: list[Any] = []
+    fits: list[Any] = []
+    breaks: list[Any] = [0]
+    corners: list[int] = []
+    flags: list[Any] = []
+    ok = True
     for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
         first, last = j == 0, j == len(bounds) - 2
-        part = {key: (v[a : b + 1] if isinstance(v, np.ndarray) and v.ndim == 2 and len(v) == len(pts) else v)
+        part: dict[str, Any] = {key: (v[a : b + 1] if isinstance(v, np.ndarray) and v.ndim == 2 and len(v) == len(pts) else v)
                 for key, v in kw.items()}
         part.update(p_start=kw["p_start"] if first else None, p_end=kw["p_end"] if last else None,
                     tan_start=kw["tan_start"] if first else None, tan_end=kw["tan_end"] if last else None)

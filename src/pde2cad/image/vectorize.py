@@ -418,7 +418,7 @@ def _straight_side_corners(pts: NDArray[np.float64], corners: NDArray[np.int64],
     n = len(pts)
     if len(corners) < 2:
         return np.arange(0)
-    hard = []
+    hard: list[int] = []
     for a, b in zip(corners, np.r_[corners[1:], corners[0] + n]):
         run = pts[np.arange(a, b + 1) % n]
         if np.linalg.norm(run[-1] - run[0]) >= 2 * CORNER_SCALE and line_chain(run, run[0], run[-1], tol) is not None:

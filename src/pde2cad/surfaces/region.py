@@ -1278,7 +1278,7 @@ def extract_boundary(
     count: int | None = None,
     alpha: float | None = None,
     tolerance: float | None = None,
-    rims: bool = True,
+    rims: bool = False,
 ) -> RegionBoundary:
     """Boundary loop, corners and fitted sides of one region of a point cloud (Sec. 5.2.1-2).
 

@@ -250,7 +250,7 @@ def _stations(
     height = coef[:, 0] + coef[:, 2] * yy + coef[:, 5] * yy * yy
     rim = q + e[:, None] * outward + height[:, None] * normal
     return RimEstimate(
-        points=rim[ok], arc=station_arc[ok], length=length, shift=e[ok], noise=sigma[ok],
+        points=rim[ok], arc=np.asarray(station_arc[ok], dtype=np.float64), length=length, shift=e[ok], noise=sigma[ok],
         sampled=sampled[ok],
     )
 
