@@ -295,6 +295,8 @@ def _fit_loop(
     untangled = _untangle(pts, curves, is_line, tol)
     if untangled is not None:
         curves, is_line, max_err, mean_err = untangled
+        if sym_name is None:
+            fitted = len(curves)  # crack-polygon lines are independent curves too
         if len(methods) != len(curves):
             methods = ["crack"] * len(curves)
     return OutlineLoop(
