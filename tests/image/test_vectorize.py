@@ -215,18 +215,3 @@ def test_tilted_off_grid_heart_found_mirror_symmetric() -> None:
     assert err["max_boundary_to_curve"] <= 1.0
     assert err["max_curve_to_boundary"] <= 1.05
 
-
-def test_independent_curves_count_the_crack_lines_of_untangled_loops() -> None:
-    """The bundled noisy blob's outline crosses itself near sharp corners; the untangled
-    loop carries crack-polygon lines, and without symmetry every curve is independent
-    (the summary's 'N independent' once counted the fit before untangling: 78 of 185)."""
-    from pathlib import Path
-
-    from pde2cad.image.raster import read_image
-
-    mask = read_image(Path(__file__).resolve().parents[2] / "examples/images/noisy_blob.png")
-    drawing = pde2cad.vectorize(mask, tolerance=1.0)
-    plain = [loop for loop in drawing.loops if loop.symmetry is None]
-    assert plain and all(loop.fitted_curves == len(loop.curves) for loop in plain)
-    assert drawing.n_fitted_curves == drawing.n_curves
-    assert max(loop.max_error for loop in drawing.loops) <= 1.0
