@@ -42,6 +42,7 @@ from pde2cad.io.clouds import as_labels
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.ribbons import shared_ribbons
+from pde2cad.layout.known import KnownCorners, with_known_corners
 from pde2cad.layout.split import SplitReport, split_segments
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
@@ -296,10 +297,11 @@ def _check_options(m: object, n: object, continuity: str, tolerance: float | Non
 
 def _build_network(
     pts: NDArray[np.float64], lab: NDArray[np.int64], continuity: str,
-    timings: dict[str, float], progress: Progress | None,
+    timings: dict[str, float], progress: Progress | None, corners: KnownCorners | None = None,
 ) -> tuple[NDArray[np.int64], Layout, EdgeNetwork, SplitReport]:
     """Steps 1-2 of :func:`fit_surfaces`: the layout (segments that are no 3/4-sided
-    region relabelled into pieces), then the edge network; returns the piece labels too."""
+    region relabelled into pieces; with known ``corners``, those corners instead), then the
+    edge network; returns the piece labels too."""
     t0 = time.perf_counter()
     _report(progress, "layout", 0, 1)
     layout = build_layout(pts, lab, check=False)
@@ -308,8 +310,11 @@ def _build_network(
     tree = getattr(layout, "tree", None)
     if tree is None:
         tree = cKDTree(pts, balanced_tree=False)
-    # Segments with 5+ corners (merged patches, T-junctions) -> 3/4-sided pieces, new labels.
-    lab, layout, splits = split_segments(pts, lab, layout, tree)
+    if corners is not None:
+        layout, splits = with_known_corners(layout, corners, pts, lab, tree), SplitReport()
+    else:
+        # Segments with 5+ corners (merged patches, T-junctions) -> 3/4-sided pieces.
+        lab, layout, splits = split_segments(pts, lab, layout, tree)
     timings["layout"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -396,6 +401,7 @@ def fit_surfaces(
     tolerance: float | None = None,
     cad_tolerance: float | None = None,
     progress: Progress | None = None,
+    corners: KnownCorners | None = None,
 ) -> SurfaceModel:
     """Fit one B-spline surface per segment of a labelled cloud, joined on shared edges.
 
@@ -436,6 +442,10 @@ def fit_surfaces(
     progress : callable, optional
         Called as ``progress(stage, done, total)`` with stages ``"layout"``, ``"edges"``,
         ``"patches"`` (after each patch) and ``"cad"``.
+    corners : KnownCorners, optional
+        The corners of every segment when the layout knows them (an automatic layout's
+        coarse mesh, :mod:`pde2cad.layout.known`): used instead of the corners inferred
+        from the labels, and no segment is split.
 
     Returns
     -------
@@ -446,7 +456,8 @@ def fit_surfaces(
     frame = Frame.of(world)
     pts = frame.to_local(world)
     timings: dict[str, float] = {}
-    lab, layout, network, splits = _build_network(pts, lab, continuity, timings, progress)
+    known = None if corners is None else corners.moved(frame.to_local)
+    lab, layout, network, splits = _build_network(pts, lab, continuity, timings, progress, known)
 
     t0 = time.perf_counter()
     try:
@@ -489,6 +500,7 @@ def reconstruct(
     tolerance: float | None = None,
     cad_tolerance: float | None = None,
     progress: Progress | None = None,
+    corners: KnownCorners | None = None,
 ) -> Reconstruction:
     """Reconstruct a segmented cloud as B-spline faces sewn into one OCP shape.
 
@@ -502,7 +514,7 @@ def reconstruct(
     """
     model = fit_surfaces(
         points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
-        cad_tolerance=cad_tolerance, progress=progress,
+        cad_tolerance=cad_tolerance, progress=progress, corners=corners,
     )
     from pde2cad.occ.build import build_shape  # OCP is optional: imported only here
 

@@ -37,7 +37,9 @@ from pde2cad.layout.auto import (
     TURN_PER_PATCH,
     AutoLayout,
     best_layout,
+    claim_sides,
     clean_labels,
+    known_corners,
     crease_edges,
     crease_regions,
     dissolve_doublets,
@@ -45,8 +47,10 @@ from pde2cad.layout.auto import (
     layout_summary,
     point_normals,
     point_regions,
+    region_borders,
     quads_of,
     single_patch_regions,
+    surface_faces,
 )
 from pde2cad.layout.curvature import curvature_radius_of_points
 
@@ -303,15 +307,19 @@ def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
     """
     if patches is not None:
         return int(patches)
-    area = float(np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]),
-                                axis=1).sum() / 2)
+    area = _area(vertices, triangles)
     if patch_size is not None:
         return int(np.clip(area / patch_size**2, 1, 4 * PATCH_RANGE[1]))
     side = TURN_PER_PATCH * curvature_radius_of_points(points, CURVATURE_PERCENTILE)
     wanted = area / side**2 if np.isfinite(side) else 0.0
     most = min(PATCH_RANGE[1], len(points) // MIN_POINTS_PER_PATCH)
     return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
+
+
+def _area(vertices: NDArray[np.float64], triangles: NDArray[np.int64]) -> float:
+    """Total area of a triangle mesh."""
+    a, b, c = (vertices[triangles[:, i]] for i in range(3))
+    return float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / 2)
 
 
 def _refined(vertices: NDArray[np.float64], triangles: NDArray[np.int64], patches: int
@@ -325,9 +333,7 @@ def _refined(vertices: NDArray[np.float64], triangles: NDArray[np.int64], patche
     """
     import trimesh
 
-    area = float(np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]),
-                                axis=1).sum() / 2)
+    area = _area(vertices, triangles)
     longest = np.sqrt(area / max(patches, 1)) / REMESH_EDGES_PER_SIDE
     v, f = trimesh.remesh.subdivide_to_size(vertices, triangles, max_edge=longest, max_iter=12)
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
@@ -363,23 +369,43 @@ def auto_layout(
     vertices, tris = guide_mesh(surface) if guide is None else guide
     count = patch_count(surface.points, vertices, tris, patches, patch_size)
     normals = point_normals(surface.points)
+    creases = (crease_edges(vertices, tris, crease_angle)
+               if surface.source == "mesh" and crease_angle < NO_CREASES else None)
+    n_creases = None if creases is None else 0
+    if creases is not None and len(creases):
+        tri_region = crease_regions(vertices, tris, crease_angle,
+                                    MIN_REGION_SHARE * _area(vertices, tris) / count)
+        n_creases = region_borders(tris, tri_region)
+    # Only creases that bound regions of a patch's size guide the remesher (faceting not).
+    align = crease_angle if n_creases else NO_CREASES
     fine_v, fine_t = _refined(vertices, tris, count)
     q_vertices, faces, _ = best_layout(
-        surface.points, lambda: quad_remesh(fine_v, fine_t, count, crease_angle), normals=normals)
-    creases = crease_edges(vertices, tris, crease_angle) if surface.source == "mesh" else None
-    labels = label_points(surface.points, q_vertices, faces, normals=normals)
-    regions = None
-    if creases is not None and len(creases):
+        surface.points, lambda: quad_remesh(fine_v, fine_t, count, align), normals=normals)
+    grid, grid_faces, owner = surface_faces(surface.points, q_vertices, faces, normals)
+    projected = claim_sides(
+        surface.points, owner[label_points(surface.points, grid, grid_faces, normals=normals)],
+        q_vertices, faces, normals)
+    regions = whole = None
+    if n_creases:
         # Patches end at the creases: labels split by smooth region, and a flat-ish disk
         # between creases is one patch.
-        tri_region = crease_regions(vertices, tris, crease_angle)
         regions = point_regions(surface.points, vertices, tris, tri_region)
         whole = single_patch_regions(vertices, tris, tri_region)[regions]
-        labels[whole] = len(faces) + regions[whole]
-    labels = clean_labels(surface.points, labels, regions=regions)
-    summary = layout_summary(faces, labels, None if creases is None else len(creases))
-    return AutoLayout(labels, q_vertices, faces, summary)
+    labels = clean_labels(surface.points, projected, regions=regions)
+    corners = known_corners(projected, labels, q_vertices, faces)
+    if corners is None and whole is not None and regions is not None and whole.any():
+        # The faces cross the creases: the pipeline finds the corners itself, and a flat
+        # disk between creases is better one patch than the faces' slivers of it.
+        labels = clean_labels(surface.points, np.where(whole, len(faces) + regions, projected),
+                              regions=regions)
+    summary = layout_summary(faces, labels, n_creases)
+    return AutoLayout(labels, q_vertices, faces, summary, corners)
 
+
+#: A crease angle that finds no creases (the remesher then aligns to none).
+NO_CREASES = 179.0
+#: Smallest crease-bounded region, as a share of a patch's area (smaller ones are faceting).
+MIN_REGION_SHARE = 0.25
 
 #: Remesher runs per layout before giving up (each asks for 1.5x the faces of the last).
 REMESH_TRIES = 5
@@ -437,27 +463,33 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
         say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")
     guide = guide_mesh(surface)
     best: tuple[float, object, AutoLayout] | None = None
+    angle = crease_angle
     for attempt in range(ATTEMPTS):
         layout = auto_layout(surface, patches=patches, patch_size=patch_size,
-                             crease_angle=crease_angle, guide=guide)
+                             crease_angle=angle, guide=guide)
         say(f"layout {attempt + 1}: {layout.summary['patches']} patches; fitting")
         try:
-            rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
+            rec = reconstruct(surface.points, layout.labels, corners=layout.corners,
+                              **kwargs)  # type: ignore[arg-type]
         except InputError as exc:
-            retry = "corners" in str(exc) or "falls apart" in str(exc)
-            if not retry or (attempt == ATTEMPTS - 1 and best is None):
+            if attempt == ATTEMPTS - 1 and best is None:
                 raise InputError(f"the automatic layout failed: {exc}") from exc
-            say(f"layout {attempt + 1} rejected ({exc}); remeshing")
+            if layout.summary.get("creases"):
+                # Faceting read as creases (a coarse organic mesh) misleads the remesher.
+                angle = NO_CREASES
+                say(f"layout {attempt + 1} rejected ({exc}); remeshing across the creases")
+            else:
+                say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
         if layout.summary.get("creases"):
             return rec, _all_points(layout, surface, full)
-        angle = _fold_angle(rec)
-        if best is None or angle < best[0]:
-            best = (angle, rec, layout)
-        if angle <= FOLD_ANGLE:
+        fold = _fold_angle(rec)
+        if best is None or fold < best[0]:
+            best = (fold, rec, layout)
+        if fold <= FOLD_ANGLE:
             break
         if attempt < ATTEMPTS - 1:
-            say(f"layout {attempt + 1} folds (seam angle {angle:.0f} deg); remeshing")
+            say(f"layout {attempt + 1} folds (seam angle {fold:.0f} deg); remeshing")
     assert best is not None
     return best[1], _all_points(best[2], surface, full)
 

@@ -37,6 +37,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
+from pde2cad.layout.known import KnownCorners
 
 #: Samples per face side when faces are sampled for the nearest-face rule: a face's samples
 #: lie 1/SAMPLES_PER_SIDE of its side apart, well below a patch's width.
@@ -88,12 +89,16 @@ class AutoLayout:
         merged away (then it is missing from ``labels``).
     summary : dict
         See :func:`layout_summary`.
+    corners : KnownCorners or None
+        The coarse vertices as every segment's corners (:func:`known_corners`), or None
+        where the labels no longer match the faces one to one.
     """
 
     labels: NDArray[np.int64]
     vertices: NDArray[np.float64]
     faces: list[tuple[int, ...]]
     summary: dict[str, object] = field(default_factory=dict)
+    corners: KnownCorners | None = None
 
 
 def quads_of(triangles: ArrayLike) -> list[tuple[int, ...]]:
@@ -330,6 +335,52 @@ def _fan(faces: list[tuple[int, ...]]) -> tuple[NDArray[np.int64], NDArray[np.in
     return np.asarray(tris, dtype=np.int64).reshape(-1, 3), np.asarray(owner, dtype=np.int64)
 
 
+#: Cells per side of each coarse face in :func:`surface_faces`.
+SUBDIVISIONS = 6
+
+
+def surface_faces(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], faces: list[tuple[int, ...]],
+    normals: NDArray[np.float64], cells: int = SUBDIVISIONS,
+) -> tuple[NDArray[np.float64], list[tuple[int, ...]], NDArray[np.int64]]:
+    """The coarse faces laid onto the surface: each a ``cells`` x ``cells`` grid of
+    triangle pairs whose vertices lie on the surface.
+
+    A coarse face is a chord through a curved surface; where the surface bends within one
+    face (an ear, a tight fillet), the normal lines of its points meet another face first
+    and a third label cuts between two neighbours (seen on the Stanford bunny on most
+    layouts). A grid on the surface has no such chords.
+
+    1. Each face's bilinear grid (a triangle is a quad with its last corner doubled).
+    2. Each grid vertex moves to the tangent plane of its nearest point, twice.
+
+    Returns
+    -------
+    vertices : (M, 3) float
+    triangles : list of 3-tuples
+    owner : (T,) int
+        The coarse face of each triangle.
+    """
+    g = np.linspace(0.0, 1.0, cells + 1)
+    s_, t_ = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+    w = np.column_stack([(1 - s_) * (1 - t_), s_ * (1 - t_), s_ * t_, (1 - s_) * t_])
+    quad = np.array([tuple(f) if len(f) == 4 else (f[0], f[1], f[2], f[2]) for f in faces])
+    grid = np.einsum("gk,fkd->fgd", w, vertices[quad]).reshape(-1, 3)
+    tree = cKDTree(points)
+    for _ in range(2):
+        _, near = tree.query(grid, workers=-1)
+        n = normals[near]
+        grid -= n * np.einsum("ij,ij->i", grid - points[near], n)[:, None]
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(cells), np.arange(cells), indexing="ij"))
+    v00 = i * (cells + 1) + j
+    cell = np.column_stack([v00, v00 + cells + 1, v00 + cells + 2, v00 + 1])
+    tri = np.concatenate([cell[:, [0, 1, 2]], cell[:, [0, 2, 3]]])
+    base = (np.arange(len(faces)) * (cells + 1) ** 2)[:, None, None]
+    tris = (tri[None] + base).reshape(-1, 3)
+    owner = np.repeat(np.arange(len(faces)), len(tri))
+    return grid, [tuple(int(x) for x in t) for t in tris], owner
+
+
 def label_points(
     points: NDArray[np.float64], vertices: NDArray[np.float64], faces: list[tuple[int, ...]],
     normals: NDArray[np.float64] | None = None,
@@ -507,6 +558,96 @@ def clean_labels(
     return lab.astype(np.int64)
 
 
+#: Share of a coarse edge, from each end, left out of :func:`claim_sides` (near a corner
+#: the other faces at that corner rightly come close), and the half-width of the strip along
+#: the edge, as a share of its length.
+SIDE_END = 0.15
+SIDE_WIDTH = 0.2
+
+
+def claim_sides(
+    points: NDArray[np.float64], face_of_point: NDArray[np.int64], vertices: NDArray[np.float64],
+    faces: list[tuple[int, ...]], normals: NDArray[np.float64],
+) -> NDArray[np.int64]:
+    """Face labels where the two faces of each coarse edge meet along it.
+
+    Projecting the coarse mesh can let a third face's label into the strip along an edge
+    (where the coarse mesh lies off a curved part): the two faces of that edge then do not
+    touch in the cloud and the layout loses a side (seen on the Stanford bunny on most
+    layouts). Along each interior coarse edge (u, v) with faces a and b:
+
+    1. The strip: points within ``SIDE_WIDTH`` x |uv| of the chord, away from its ends
+       (``SIDE_END``), whose normal is within 45 deg of the faces' mean normal.
+    2. Its points of other labels take a or b, by the side of the plane through the
+       chord along the normal they lie on (the side of a's centroid is a's).
+    """
+    lab = np.asarray(face_of_point, dtype=np.int64).copy()
+    edge_faces: dict[tuple[int, int], list[int]] = {}
+    for f, cyc in enumerate(faces):
+        for a, b in zip(cyc, cyc[1:] + cyc[:1]):
+            edge_faces.setdefault((min(a, b), max(a, b)), []).append(f)
+    tree = cKDTree(points)
+    centroid = np.array([vertices[list(c)].mean(axis=0) for c in faces])
+    for (u, v), owners in edge_faces.items():
+        if len(owners) != 2:
+            continue
+        fa, fb = owners
+        pu, chord = vertices[u], vertices[v] - vertices[u]
+        length = float(np.linalg.norm(chord))
+        near = np.asarray(tree.query_ball_point(pu + chord / 2, length / 2), dtype=np.int64)
+        near = near[(lab[near] != fa) & (lab[near] != fb)]
+        if not len(near) or length == 0:
+            continue
+        rel = points[near] - pu
+        t = rel @ chord / length**2
+        off = rel - np.outer(t, chord)
+        na, nb = _face_normal(vertices, faces[fa]), _face_normal(vertices, faces[fb])
+        normal = na + (nb if na @ nb >= 0 else -nb)  # the remesher's windings can differ
+        normal -= chord * (normal @ chord) / length**2
+        normal /= max(float(np.linalg.norm(normal)), 1e-300)
+        ok = ((t > SIDE_END) & (t < 1 - SIDE_END)
+              & (np.linalg.norm(off, axis=1) <= SIDE_WIDTH * length)
+              & (np.abs(normals[near] @ normal) >= np.cos(np.radians(45.0))))
+        side = np.cross(chord, normal)
+        a_side = (centroid[fa] - pu) @ side
+        lab[near[ok]] = np.where((off[ok] @ side) * a_side >= 0, fa, fb)
+    return lab
+
+
+def _face_normal(vertices: NDArray[np.float64], cycle: tuple[int, ...]) -> NDArray[np.float64]:
+    """Unit normal of a coarse face (its diagonals' cross product), oriented by its winding."""
+    c = vertices[list(cycle)]
+    n = np.cross(c[2] - c[0], c[-1] - c[1]) if len(c) == 4 else np.cross(c[1] - c[0], c[2] - c[0])
+    return n / max(float(np.linalg.norm(n)), 1e-300)
+
+
+def known_corners(
+    face_of_point: NDArray[np.int64], labels: NDArray[np.int64], vertices: NDArray[np.float64],
+    faces: list[tuple[int, ...]],
+) -> KnownCorners | None:
+    """The coarse mesh's vertices as the corners of the segments ``labels``.
+
+    1. Each label's face: the face most of its points were projected on
+       (``face_of_point``, from :func:`label_points`).
+    2. Only when labels and faces match one to one (no face merged away, none split by a
+       crease) are the faces' vertex cycles the segments' corners; else None.
+    3. A vertex on an edge of one face lies on the open boundary.
+    """
+    pairs, count = np.unique(np.column_stack([labels, face_of_point]), axis=0,
+                             return_counts=True)
+    order = np.lexsort((-count, pairs[:, 0]))
+    first = np.r_[True, pairs[order][1:, 0] != pairs[order][:-1, 0]]
+    label_face = pairs[order][first]
+    n_labels = int(labels.max()) + 1
+    if n_labels != len(faces) or len(np.unique(label_face[:, 1])) != len(faces):
+        return None
+    edges, uses = face_edges(faces)
+    on_open = np.zeros(len(vertices), dtype=bool)
+    on_open[edges[uses == 1].ravel()] = True
+    segments = {int(lab): tuple(int(v) for v in faces[int(f)]) for lab, f in label_face}
+    return KnownCorners(np.asarray(vertices, dtype=np.float64), segments, on_open)
+
+
 def crease_edges(
     vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE
 ) -> NDArray[np.int64]:
@@ -525,9 +666,16 @@ def crease_edges(
 
 
 def crease_regions(
-    vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE
+    vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE,
+    min_area: float = 0.0,
 ) -> NDArray[np.int64]:
     """Smooth region of each triangle: triangles joined across edges that are no crease.
+
+    1. Triangles joined across edges whose dihedral angle is at most ``angle`` deg.
+    2. Regions smaller than ``min_area`` are no faces of the part: on a coarse organic mesh
+       (the 1.8k-vertex Stanford bunny: 10 % of its edges bend by over 25 deg) faceting
+       encloses specks of a few triangles that no patch could fill. Their triangles join
+       the larger region next to them (grown across triangle edges).
 
     Returns
     -------
@@ -542,7 +690,34 @@ def crease_regions(
     smooth = pair[cos >= np.cos(np.radians(angle))]
     g = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])), shape=(len(tri),) * 2)
     _, region = connected_components(g, directed=False)
+    if min_area > 0:
+        area = np.linalg.norm(np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]],
+                                       vertices[tri[:, 2]] - vertices[tri[:, 0]]), axis=1) / 2
+        small = (np.bincount(region, weights=area) < min_area)[region]
+        if small.any() and not small.all():
+            region = _grow_into(region, ~small, pair)
+    _, region = np.unique(region, return_inverse=True)
     return region.astype(np.int64)
+
+
+def region_borders(triangles: NDArray[np.int64], region: NDArray[np.int64]) -> int:
+    """Edges of a triangle mesh whose two triangles lie in different regions."""
+    _, pair = _edge_faces(np.asarray(triangles, dtype=np.int64))
+    return int((region[pair[:, 0]] != region[pair[:, 1]]).sum())
+
+
+def _grow_into(region: NDArray[np.int64], kept: NDArray[np.bool_], pair: NDArray[np.int64]
+               ) -> NDArray[np.int64]:
+    """Triangles not ``kept`` take the region of a kept neighbour, ring by ring."""
+    region, kept = region.copy(), kept.copy()
+    both = np.concatenate([pair, pair[:, ::-1]])
+    while not kept.all():
+        step = both[kept[both[:, 1]] & ~kept[both[:, 0]]]
+        if not len(step):
+            break
+        region[step[:, 0]] = region[step[:, 1]]
+        kept[step[:, 0]] = True
+    return region
 
 
 def single_patch_regions(
