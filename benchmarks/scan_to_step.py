@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
+import os
 import sys
 import tempfile
 import time
@@ -49,6 +50,10 @@ SAMPLES = 50_000
 NOISE = 0.002
 REFERENCE = 300_000
 OCC_STL = Path("/usr/share/opencascade/data/stl")
+
+
+#: Environment variable with the ``--mesh-dir`` folders (the cases run in spawned processes).
+MESH_DIRS = "PDE2CAD_BENCH_MESH_DIRS"
 
 
 def _analytic() -> dict[str, Any]:
@@ -73,6 +78,10 @@ def _analytic() -> dict[str, Any]:
         pass
     for path in sorted(OCC_STL.glob("*.stl")) if OCC_STL.is_dir() else []:
         cases[f"occ_{path.stem}"] = lambda p=path: trimesh.load(str(p), force="mesh")
+    for folder in (Path(p) for p in os.environ.get(MESH_DIRS, "").split(os.pathsep) if p):
+        for path in sorted(folder.iterdir()):
+            if path.suffix.lower() in (".off", ".stl", ".obj", ".ply"):
+                cases[path.stem] = lambda p=path: trimesh.load(str(p), force="mesh")
     return cases
 
 
@@ -187,7 +196,10 @@ def main() -> None:
     parser.add_argument("--continuity", choices=["c0", "c1"], default="c1")
     parser.add_argument("--timeout", type=float, default=120.0)
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--mesh-dir", type=Path, action="append", default=[],
+                        help="a folder of meshes (OFF/STL/OBJ/PLY), each one more case")
     args = parser.parse_args()
+    os.environ[MESH_DIRS] = os.pathsep.join(str(p.resolve()) for p in args.mesh_dir)
     names = args.cases.split(",") if args.cases else list(_analytic())
     print(f"{'case':18s} {'var':6s} {'method':8s} {'pat':>4s} {'valid':>5s} {'closed':>6s} "
           f"{'free':>4s} {'gap/D':>8s} {'seam':>6s} {'in->f/D':>8s} {'f->in95':>8s} {'>1%D':>6s} "

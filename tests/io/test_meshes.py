@@ -227,3 +227,31 @@ def test_labels_out_rerun_reproduces_the_layout(tmp_path: Path) -> None:
         # 0.2 % of D noise: the faces stay within the noise of the true sphere.
         assert s["mean_error_rel"] < 2e-3
     assert b["mean_error_rel"] == pytest.approx(a["mean_error_rel"], rel=0.05)
+
+
+def test_a_body_with_thin_lobes_gets_a_layout_from_its_coarse_corners(tmp_path: Path) -> None:
+    """Regression: a bumpy ellipsoid with two thin lobes (ears): the corners inferred from
+    projected labels read bent borders as corners (5-cornered segments, split pieces too
+    small) or lost a side; with the coarse mesh's own corners every layout is fitted to a
+    closed solid within the issue's distance bounds."""
+    pytest.importorskip("OCP")
+    from pde2cad.io.meshes import reconstruct_auto
+    from pde2cad.occ.continuity import measure
+
+    sphere = trimesh.creation.icosphere(5)
+    v = np.asarray(sphere.vertices)
+    r = 1 + 0.12 * np.sin(3 * v[:, 0]) * np.cos(2 * v[:, 1])
+    for ear in (np.array([0.35, 0.2, 0.92]), np.array([-0.35, 0.2, 0.92])):
+        r += 0.9 * np.exp(-np.sum((v - ear / np.linalg.norm(ear)) ** 2, axis=1) / 0.03)
+    verts = v * r[:, None] * [1.3, 1.0, 0.9]
+    path = _off(tmp_path / "lobes.off", verts, np.asarray(sphere.faces))
+    surface = read_surface(path, sample_points=40_000)
+    rec, layout = reconstruct_auto(surface, continuity="c0")
+    assert layout.corners is not None and not rec.splits.pieces
+    diagonal = float(np.linalg.norm(np.ptp(verts, axis=0)))
+    m = measure(rec.shape, 10)
+    assert m["valid"] and m["closed"] and m["free_edges"] == 0
+    assert m["max_gap"] <= 1e-7 * diagonal
+    dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
+                                          axis=1) for p in rec.patches.values()])
+    assert dist.mean() <= 2e-3 * diagonal and np.mean(dist > 0.01 * diagonal) < 0.01

@@ -349,7 +349,7 @@ def guide_mesh(surface: Surface) -> tuple[NDArray[np.float64], NDArray[np.int64]
 def auto_layout(
     surface: Surface, *, patches: int | None = None, patch_size: float | None = None,
     crease_angle: float = CREASE_ANGLE,
-    guide: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None,
+    guide: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None, finer: float = 1.0,
 ) -> AutoLayout:
     """One label per point of ``surface``: a coarse quad mesh's faces as patches.
 
@@ -365,9 +365,11 @@ def auto_layout(
     guide : (vertices, triangles), optional
         :func:`guide_mesh` of ``surface`` when already made (it is the slow step for a
         cloud, and the same for every layout tried).
+    finer : float
+        Factor on the patch count (a layout that folded is tried again finer).
     """
     vertices, tris = guide_mesh(surface) if guide is None else guide
-    count = patch_count(surface.points, vertices, tris, patches, patch_size)
+    count = int(round(finer * patch_count(surface.points, vertices, tris, patches, patch_size)))
     normals = point_normals(surface.points)
     creases = (crease_edges(vertices, tris, crease_angle)
                if surface.source == "mesh" and crease_angle < NO_CREASES else None)
@@ -414,9 +416,11 @@ REMESH_TRIES = 5
 #: face the pipeline reads with a spurious corner, or a face that folds at a corner).
 ATTEMPTS = 3
 #: A seam whose faces' normals differ by more than this (degrees) on a surface without
-#: creases is a fold (measured: 174-179 deg on some sphere and ellipsoid layouts, where
-#: the other layouts stay below 4 deg); the layout is then tried again.
-FOLD_ANGLE = 90.0
+#: creases is a fold or a patch turning too far (measured: 174-179 deg on some sphere and
+#: ellipsoid layouts, 42 deg at the tip of a lobe 0.1 of the body wide, where clean layouts
+#: stay below 4 deg); the layout is then tried again with FINER x the patches.
+FOLD_ANGLE = 10.0
+FINER = 1.5
 
 
 def _fold_angle(rec: object) -> float:
@@ -439,11 +443,13 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
        the label of its nearest subsample point (one KD-tree query), so ``layout.labels``
        has one label per input point.
     2. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
-    3. A layout the pipeline rejects (a segment with other than 3 or 4 corners, or one whose
-       points fall apart in the pipeline's neighbour graph, seen on a scan with 4x density
-       changes) is remeshed.
+    3. A layout the pipeline rejects (a segment whose points fall apart in the pipeline's
+       neighbour graph, seen on a scan with 4x density changes; a side lost) is remeshed;
+       after a rejected crease-bounded layout, across the creases (``NO_CREASES``: faceting
+       of a coarse organic mesh read as creases misleads the remesher).
     4. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
-       folded at a corner) is remeshed too; the result with the smallest such angle is kept.
+       folded at a corner, or turning too far) is remeshed with ``FINER`` x the patches;
+       the result with the smallest such angle is kept.
 
     Returns
     -------
@@ -463,10 +469,10 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
         say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")
     guide = guide_mesh(surface)
     best: tuple[float, object, AutoLayout] | None = None
-    angle = crease_angle
+    angle, finer = crease_angle, 1.0
     for attempt in range(ATTEMPTS):
         layout = auto_layout(surface, patches=patches, patch_size=patch_size,
-                             crease_angle=angle, guide=guide)
+                             crease_angle=angle, guide=guide, finer=finer)
         say(f"layout {attempt + 1}: {layout.summary['patches']} patches; fitting")
         try:
             rec = reconstruct(surface.points, layout.labels, corners=layout.corners,
@@ -489,7 +495,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
         if fold <= FOLD_ANGLE:
             break
         if attempt < ATTEMPTS - 1:
-            say(f"layout {attempt + 1} folds (seam angle {fold:.0f} deg); remeshing")
+            finer *= FINER
+            say(f"layout {attempt + 1} folds (seam angle {fold:.0f} deg); remeshing with "
+                f"{FINER}x the patches")
     assert best is not None
     return best[1], _all_points(best[2], surface, full)
 
