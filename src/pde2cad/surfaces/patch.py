@@ -57,7 +57,7 @@ from pde2cad.surfaces.deformation import (
     fit_deformation,
     select_terms,
 )
-from pde2cad.surfaces.projection import project_points
+from pde2cad.surfaces.projection import closest_points, project_points
 from pde2cad.surfaces.region import RegionBoundary, extract_boundary
 
 #: Automatic term counts tried on 3-sided patches (see fit_patch).
@@ -452,7 +452,8 @@ def fit_patch(
         The points' closest-point parameters on the bilinear Coons patch of these sides, as
         a previous fit on the same points and sides found them (``Patch.params`` of a C0
         fit): the projection onto the bilinear base is skipped. Must come with ``outside``
-        and needs ``boundary``; the result is the same as without them when they are that
+        and needs ``boundary``; the result is the same as without them (to rounding: the
+        base values come from an evaluation instead of the projection) when they are that
         fit's values.
     outside : (N,) bool, optional
         The matching ``Patch.outside`` flags (required with ``params``).
@@ -495,8 +496,10 @@ def fit_patch(
         raise InputError(f"points are 3-D but the boundary curves have dimension {sides[0].dim}")
 
     bilinear = _bilinear(sides)
+    # S_c at the parameters: the projection's closest points (no second evaluation).
+    on_base: NDArray[np.float64] | None = None
     if given_params is None:
-        params, _, outside = project_points(bilinear, pts)
+        params, _, outside, on_base = closest_points(bilinear, pts)
     else:
         params, outside = given_params
     base: BilinearCoons | BicubicCoons = bilinear
@@ -519,9 +522,10 @@ def fit_patch(
             twists=rib.twists,
         )
         # The bicubic base is close to the bilinear one: Newton from the old parameters.
-        params, _, outside = project_points(base, pts, initial=params)
-
-    residuals = pts - _cell_values(base, params[:, 0], params[:, 1])
+        params, _, outside, on_base = closest_points(base, pts, initial=params)
+    if on_base is None:
+        on_base = _cell_values(base, params[:, 0], params[:, 1])
+    residuals = pts - on_base
     base_err = np.sqrt(np.einsum("ij,ij->i", residuals, residuals))
     # A 3-sided patch's top side is one point (the apex): C0 terms get zero slope across it.
     flat_top = len(sides) == 3 and kind == "c0"
