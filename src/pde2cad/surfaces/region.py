@@ -44,7 +44,9 @@ from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.rim import (
+    DENSITY_RANK,
     RimEstimate,
+    fit_rim_spline,
     locate_rim,
     onto_surface,
     sample_spacing,
@@ -108,6 +110,10 @@ RIM_BAND = 40.0
 #: Loop points within this RMS distance (in sample spacings) of their fitted side are a
 #: sampled rim (structured data), whose sides stay on them (see _sampled_rim).
 SAMPLED_LOOP = 0.05
+#: A side is sparser than the band where its spacing estimate exceeds the band's by this.
+SPARSE_SIDE = 1.2
+#: Fewest rim stations, spread over half the side, whose line may move corners (_covers).
+COVER_STATIONS = 6
 #: Newton rounds of the side fits: boundary points are smooth samples, more rounds help.
 SIDE_ROUNDS = 10
 
@@ -1111,13 +1117,14 @@ def _rim_side(
     tolerance: float,
 ) -> tuple[PiecewiseBezier, float]:
     """The side through rim points ``run`` (corners included): a line when the run is
-    straight to ``tolerance``, a plane curve when it is planar, else a free 3D chain."""
+    straight to ``tolerance``, a plane curve when it is planar, else a free 3D curve (a C2
+    spline, :func:`~pde2cad.surfaces.rim.fit_rim_spline`)."""
     off = _off_chord(run, start, end)
     if _explained(off, tolerance):
         ctrl = start + np.outer(np.arange(4) / 3.0, end - start)
         ctrl[0], ctrl[3] = start, end  # bit-identical corners for the neighbouring sides
         return PiecewiseBezier.from_cubic(ctrl), float(off.max())
-    side, error = fit_side(run, tolerance, start, end)
+    side, error = fit_rim_spline(run, tolerance, start, end)
     if plane is None:
         return side, error
     # Control points onto the plane: a Bezier with planar control points is planar, and the
@@ -1185,6 +1192,26 @@ def _onto_straight_rims(
     return out
 
 
+def _side_spacing(tree: cKDTree, run: NDArray[np.float64], spacing: float) -> float:
+    """Sample spacing along one side, for clouds whose density varies: from the distances
+    of the side's loop points to their ``DENSITY_RANK``-th neighbour (half discs at a rim:
+    ``s = r sqrt(pi / 2k)``), towards its sparse end (75th percentile), where that exceeds
+    ``spacing`` (the band's) by a factor SPARSE_SIDE; else ``spacing``. Windows sized by
+    the band's spacing hold too few points where the cloud is sparser than average, and
+    get dropped."""
+    dist, _ = tree.query(run, k=DENSITY_RANK + 1)
+    local = float(np.quantile(dist[:, -1], 0.75)) * np.sqrt(np.pi / (2.0 * DENSITY_RANK))
+    # On a uniform cloud the estimate exceeds the band's by 5-10 % (the loop points lie a
+    # little inside the rim, so more than a half disc): only a clear excess is a sparser side.
+    return local if local > SPARSE_SIDE * spacing else spacing
+
+
+def _covers(rim: RimEstimate) -> bool:
+    """Whether rim stations span most of their side (at least COVER_STATIONS of them over
+    half its length), so a line through them stands for the whole side."""
+    return len(rim.arc) >= COVER_STATIONS and float(np.ptp(rim.arc)) >= 0.5 * rim.length
+
+
 def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float) -> bool:
     """Whether the loop points of a side are samples on its rim (a row of structured data).
 
@@ -1228,12 +1255,12 @@ def _relocate_rims(
     """
     pts = pts[band]
     tree = cKDTree(pts)
-    spacing = sample_spacing(pts, tree)
+    spacings = [_side_spacing(tree, run, sample_spacing(pts, tree)) for run in runs]
     c = len(sides)
     # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
     rims = [
-        None if _sampled_rim(run, side, spacing) else locate_rim(pts, side, spacing, tree)
-        for run, side in zip(runs, sides)
+        None if _sampled_rim(run, side, gap) else locate_rim(pts, side, gap, tree)
+        for run, side, gap in zip(runs, sides, spacings)
     ]
     rims = [None if r is None or r.sampled.mean() > 0.5 else r for r in rims]
     if all(r is None for r in rims):
@@ -1245,6 +1272,7 @@ def _relocate_rims(
         for j in range(c):  # 3-4 corners
             before, after = rims[j - 1], rims[j]
             if before is not None and after is not None:
+                spacing = max(spacings[j - 1], spacings[j])
                 normal = surface_normal(pts, tree, corners[j], spacing)
                 corner = _rim_corner(
                     before, after, corners[j], perimeter / REFINE_SPAN, normal, 0.1 * spacing
@@ -1255,7 +1283,7 @@ def _relocate_rims(
     tol = _rim_tolerance(inner, diagonal) if tolerance is None else tolerance
     if not fixed:
         corners = _onto_straight_rims(corners, [
-            None if r is None else _straight_line(r.points, tol) for r in rims
+            None if r is None or not _covers(r) else _straight_line(r.points, tol) for r in rims
         ])
     full = [np.vstack([corners[k], inner[k], corners[(k + 1) % c]]) for k in range(c)]
     out, errors = [], np.empty(c)
