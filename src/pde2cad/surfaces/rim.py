@@ -429,11 +429,8 @@ def fit_rim_spline(
 
 
 def _held_spline(
-    run: NDArray[np.float64],
-    s: NDArray[np.float64],
-    knots: NDArray[np.float64],
-    start: NDArray[np.float64],
-    end: NDArray[np.float64],
+    run: NDArray[np.float64], s: NDArray[np.float64], knots: NDArray[np.float64],
+    start: NDArray[np.float64], end: NDArray[np.float64],
 ) -> BSpline:
     """Least-squares cubic spline on ``knots`` through ``run`` at parameters ``s``, its end
     control points held at ``start`` and ``end``."""
