@@ -1124,7 +1124,7 @@ def _rim_side(
         ctrl = start + np.outer(np.arange(4) / 3.0, end - start)
         ctrl[0], ctrl[3] = start, end  # bit-identical corners for the neighbouring sides
         return PiecewiseBezier.from_cubic(ctrl), float(off.max())
-    side, error = fit_rim_spline(run, tolerance, start, end)
+    side, error = fit_rim_spline(run, start, end)
     if plane is None:
         return side, error
     # Control points onto the plane: a Bezier with planar control points is planar, and the
