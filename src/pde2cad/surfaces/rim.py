@@ -210,7 +210,12 @@ def _stations(
         station_arc = np.array([0.5 * length])
     # Samples near the reference: each with its nearest reference sample and arc position.
     reach = depth + 2.0 * spacing
-    near = np.unique(np.concatenate(tree.query_ball_point(ref, reach, workers=-1)).astype(np.int64))
+    # Balls every reach / 2 along the reference, a little wider, cover the same tube as
+    # balls at every reference sample (half a spacing apart) with ~8x fewer repeated hits.
+    stride = max(1, int(0.5 * reach / max(float(arc[1] - arc[0]), 1e-300)))
+    centres = np.vstack([ref[::stride], ref[-1:]])
+    balls = tree.query_ball_point(centres, 1.04 * reach, workers=-1)
+    near = np.unique(np.concatenate(balls).astype(np.int64))
     if not len(near):
         return None
     p = points[near]
