@@ -397,8 +397,10 @@ def fit_rim_spline(
 ) -> tuple[PiecewiseBezier, float]:
     """A C2 cubic spline side through ordered rim points ``run`` (m, D), from ``start`` to
     ``end`` exactly, on 1..``RIM_PIECES`` uniform pieces: the count with the least Bayesian
-    information criterion ``n log(RSS / n) + k log n`` over the ``n = m D`` coordinates and
-    ``k`` free control-point coordinates.
+    information criterion ``n log(RSS / (m D)) + k log n`` for ``k`` free control-point
+    coordinates and ``n = m D / 2`` independent ones among the ``m D`` data (neighbouring
+    stations share half their window, so their noise is correlated: with ``n = m D`` a
+    noisy flag's sides took 3-6 pieces that followed it).
 
     A G1 chain of Béziers changes speed at its joints; a bilinear Coons patch blends the
     side across the whole patch, so a speed jump there draws a crease through the interior
@@ -426,7 +428,9 @@ def fit_rim_spline(
             s = _closest_parameters(spline, run, s)
         miss = np.linalg.norm(spline(s) - run, axis=1)
         rss = max(float(miss @ miss), 1e-300 * count)
-        score = count * np.log(rss / count) + (pieces + 1) * run.shape[1] * np.log(count)
+        score = 0.5 * count * np.log(rss / count) + (pieces + 1) * run.shape[1] * np.log(
+            0.5 * count
+        )
         if best is None or score < best[0]:
             best = score, spline, breaks, float(miss.max())
     assert best is not None
