@@ -18,7 +18,8 @@ The cloud is unordered (shuffled), uniformly random over a sheet whose true surf
 Each repeat times, back to back on the same cloud:
 
 * ours: ``fit_patch(points, m=10, n=10)``, exactly as a user calls it: boundary extraction
-  (alpha shape, corners, side fits), parameterization and the sine deformation (Eq. 5.17);
+  (alpha shape, corners, rim estimate, side fits), parameterization and the sine
+  deformation (Eq. 5.17);
 * open3d: ``estimate_normals`` (hybrid radius 6 spacings, 30 neighbours), orientation along
   +z (the sheets are height fields) and ``create_from_point_cloud_poisson(depth)``.
 
