@@ -31,6 +31,8 @@ apex ``S(., 1)`` is corner 2).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -1273,10 +1275,13 @@ def _relocate_rims(
     spacings = [_side_spacing(tree, run, band_spacing) for run in runs]
     c = len(sides)
     # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
-    rims = [
-        None if _sampled_rim(run, side, gap) else locate_rim(pts, side, gap, tree)
-        for run, side, gap in zip(runs, sides, spacings)
-    ]
+    def rim_of(k: int) -> RimEstimate | None:
+        run, side, gap = runs[k], sides[k], spacings[k]
+        return None if _sampled_rim(run, side, gap) else locate_rim(pts, side, gap, tree)
+
+    # The sides on threads: numpy and the KD-tree release the GIL in their loops.
+    with ThreadPoolExecutor(max_workers=min(c, os.cpu_count() or 1)) as pool:
+        rims = list(pool.map(rim_of, range(c)))
     rims = [None if r is None or r.sampled.mean() > 0.5 else r for r in rims]
     depth = [
         max(RIM_DEPTH * gap, NOISE_DEPTH * float(np.median(r.noise))) + 2.0 * gap

@@ -69,7 +69,7 @@ _DENSITY_SAMPLE = 20_000
 #: Loop points a polyline reference is smoothed over (odd).
 REFERENCE_WINDOW = 31
 #: Offsets tried per station by the likelihood search (then refined by a parabola).
-_GRID = 65
+_GRID = 33
 
 
 @dataclass(frozen=True)
