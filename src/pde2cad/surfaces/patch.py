@@ -305,6 +305,7 @@ def _resolve_boundary(
     boundary: RegionBoundary | Sequence[PiecewiseBezier | ArrayLike] | None,
     corners: ArrayLike | None,
     side_tolerance: float | None,
+    rims: bool = True,
 ) -> tuple[RegionBoundary | None, tuple[PiecewiseBezier, ...]]:
     """The region boundary (extracted unless given) and its head-to-tail sides."""
     if boundary is not None and (corners is not None or side_tolerance is not None):
@@ -320,7 +321,7 @@ def _resolve_boundary(
                 "Fig. 5.11)"
             )
     if boundary is None:
-        region = extract_boundary(pts, corners=corners, tolerance=side_tolerance)
+        region = extract_boundary(pts, corners=corners, tolerance=side_tolerance, rims=rims)
         return region, tuple(region.sides)
     if isinstance(boundary, RegionBoundary):
         return boundary, tuple(boundary.sides)
@@ -396,6 +397,7 @@ def fit_patch(
     refine: int = 0,
     c1_basis: C1Basis = "complete",
     boundary_tolerance: float | None = None,
+    rims: bool = True,
     params: ArrayLike | None = None,
     outside: ArrayLike | None = None,
 ) -> Patch:
@@ -444,6 +446,11 @@ def fit_patch(
         not deformed, so the error near them is the side fit's; but a tolerance below the
         zigzag of the alpha-shape loop of unstructured points makes wavy sides and more
         points beyond them (measured: worse errors), so lower it only for clean boundaries.
+    rims : bool
+        When the boundary is extracted: sides on the estimated true rim (default) or on the
+        boundary loop, about half a sample spacing inside (see
+        :func:`~pde2cad.surfaces.region.extract_boundary`). The rim estimate costs about
+        0.3 s on 1e6 points (a 100 x 60 flag of 1e6 points: 6.2e-6 D against 3.6e-5 D).
     c1_basis : {"complete", "thesis"}
         C1 deformation terms: ``sin(pi t) sin(k pi t)`` (kind ``"c1full"``, complete) or the
         thesis's ``sin^2(k pi t)`` (Eq. 5.21, kind ``"c1"``, symmetric about the patch centre
@@ -490,7 +497,7 @@ def fit_patch(
     pts = _check_points(points)
     _check_terms(m, n, pts, tolerance)
     given_ribbons = _check_ribbons(ribbons, continuity)
-    region, sides = _resolve_boundary(pts, boundary, corners, boundary_tolerance)
+    region, sides = _resolve_boundary(pts, boundary, corners, boundary_tolerance, rims)
     given_params = _check_params(params, outside, pts.shape[0], boundary)
     if pts.shape[1] != sides[0].dim:
         raise InputError(f"points are 3-D but the boundary curves have dimension {sides[0].dim}")
