@@ -190,8 +190,8 @@ def run(shape: str, count: int, repeat: int, depth: int, rims: bool = True) -> d
 def report(res: dict[str, Any]) -> None:
     print(
         f"\n{res['shape']}, {res['points']:,d} unordered points: fit_patch(M = N = {TERMS}, "
-        f"rims={res['rims']}, boundary extraction included) vs open3d normals + Poisson depth {res['depth']} "
-        f"({os.cpu_count()} cores; wall s / CPU s)"
+        f"rims={res['rims']}, boundary extraction included) vs open3d normals + Poisson depth "
+        f"{res['depth']} ({os.cpu_count()} cores; wall s / CPU s)"
     )
     print(f"{'repeat':>6} {'load':>5} {'ours':>13} {'open3d':>15} {'ratio':>7}")
     for k, r in enumerate(res["repeats"]):
