@@ -18,7 +18,8 @@ The cloud is unordered (shuffled), uniformly random over a sheet whose true surf
 Each repeat times, back to back on the same cloud:
 
 * ours: ``fit_patch(points, m=10, n=10)``, exactly as a user calls it: boundary extraction
-  (alpha shape, corners, side fits), parameterization and the sine deformation (Eq. 5.17);
+  (alpha shape, corners, rim estimate, side fits), parameterization and the sine
+  deformation (Eq. 5.17);
 * open3d: ``estimate_normals`` (hybrid radius 6 spacings, 30 neighbours), orientation along
   +z (the sheets are height fields) and ``create_from_point_cloud_poisson(depth)``.
 
@@ -106,8 +107,8 @@ def timed(fn: Callable[[], Any]) -> tuple[Any, float, float]:
     return out, time.perf_counter() - w0, time.process_time() - c0
 
 
-def ours(points: np.ndarray) -> Patch:
-    return fit_patch(points, m=TERMS, n=TERMS)
+def ours(points: np.ndarray, rims: bool = True) -> Patch:
+    return fit_patch(points, m=TERMS, n=TERMS, rims=rims)
 
 
 def poisson(points: np.ndarray, shape: str, depth: int) -> Any:
@@ -153,19 +154,19 @@ def traced_peak(fn: Callable[[], Any]) -> float:
         tracemalloc.stop()
 
 
-def run(shape: str, count: int, repeat: int, depth: int) -> dict[str, Any]:
+def run(shape: str, count: int, repeat: int, depth: int, rims: bool = True) -> dict[str, Any]:
     points = make_cloud(shape, count)
     rows = []
     patch = mesh = None
     for _ in range(repeat):
         load = os.getloadavg()[0]
-        patch, t_ours, c_ours = timed(lambda: ours(points))
+        patch, t_ours, c_ours = timed(lambda: ours(points, rims))
         mesh, t_o3d, c_o3d = timed(lambda: poisson(points, shape, depth))
         rows.append(
             {"load": load, "ours_s": t_ours, "ours_cpu": c_ours, "open3d_s": t_o3d,
              "open3d_cpu": c_o3d, "ratio": t_o3d / t_ours}
         )
-    _, t_bnd, c_bnd = timed(lambda: extract_boundary(points))
+    _, t_bnd, c_bnd = timed(lambda: extract_boundary(points, rims=rims))
     truth = truth_grid(shape)
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     assert patch is not None
@@ -177,7 +178,8 @@ def run(shape: str, count: int, repeat: int, depth: int) -> dict[str, Any]:
         "median_ratio": float(np.median([r["ratio"] for r in rows])),
         "boundary_s": t_bnd,
         "boundary_cpu": c_bnd,
-        "peak_bytes": traced_peak(lambda: ours(points)),
+        "rims": rims,
+        "peak_bytes": traced_peak(lambda: ours(points, rims)),
         "diagonal": diagonal,
         "ours_truth": patch_truth(patch, truth),
         "ours_variables": patch.n_variables,
@@ -188,8 +190,8 @@ def run(shape: str, count: int, repeat: int, depth: int) -> dict[str, Any]:
 def report(res: dict[str, Any]) -> None:
     print(
         f"\n{res['shape']}, {res['points']:,d} unordered points: fit_patch(M = N = {TERMS}, "
-        f"boundary extraction included) vs open3d normals + Poisson depth {res['depth']} "
-        f"({os.cpu_count()} cores; wall s / CPU s)"
+        f"rims={res['rims']}, boundary extraction included) vs open3d normals + Poisson depth "
+        f"{res['depth']} ({os.cpu_count()} cores; wall s / CPU s)"
     )
     print(f"{'repeat':>6} {'load':>5} {'ours':>13} {'open3d':>15} {'ratio':>7}")
     for k, r in enumerate(res["repeats"]):
@@ -220,9 +222,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--depth", type=int, default=9, help="Poisson octree depth (default 9)")
     parser.add_argument("--quick", action="store_true", help="1e5 points, 1 repeat")
     parser.add_argument("--json", type=Path, help="write all numbers here")
+    parser.add_argument("--loop-sides", action="store_true",
+                        help="fit_patch(rims=False): sides on the boundary loop, no rim estimate")
     args = parser.parse_args(argv)
     count, repeat = (100_000, 1) if args.quick else (args.points, args.repeat)
-    res = run(args.shape, count, repeat, args.depth)
+    res = run(args.shape, count, repeat, args.depth, rims=not args.loop_sides)
     report(res)
     if args.json:
         args.json.write_text(json.dumps(res, indent=2))

@@ -576,13 +576,16 @@ def test_precomputed_params_give_the_same_fit(continuity: str) -> None:
     )
     np.testing.assert_array_equal(reused.params, plain.params)
     np.testing.assert_array_equal(reused.outside, plain.outside)
-    np.testing.assert_array_equal(
-        reused.deformation.coefficients, plain.deformation.coefficients
+    # To rounding: without params the base values are the projection's closest points,
+    # with them an evaluation at the same parameters.
+    tiny = 1e-13 * float(np.linalg.norm(np.ptp(points, axis=0)))
+    np.testing.assert_allclose(
+        reused.deformation.coefficients, plain.deformation.coefficients, rtol=0, atol=tiny
     )
     u, v = np.meshgrid(RIM, RIM)
-    np.testing.assert_array_equal(reused.evaluate(u, v), plain.evaluate(u, v))
-    assert reused.errors == plain.errors
-    assert reused.fit_errors == plain.fit_errors
+    np.testing.assert_allclose(reused.evaluate(u, v), plain.evaluate(u, v), rtol=0, atol=tiny)
+    assert reused.errors == pytest.approx(plain.errors, rel=1e-9)
+    assert reused.fit_errors == pytest.approx(plain.fit_errors, rel=1e-9)
     assert set(reused.fit_errors) == {"mean", "max", "rms", "base_mean", "base_max"}
     assert reused.fit_errors["mean"] == reused.errors["mean"]
 

@@ -10,7 +10,7 @@ from pde2cad.errors import InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.coons import BicubicCoons, BilinearCoons, three_sided
 from pde2cad.surfaces.deformation import Deformation, DeformedPatch
-from pde2cad.surfaces.projection import project_points
+from pde2cad.surfaces.projection import closest_points, project_points
 
 RNG = np.random.default_rng(5223)
 
@@ -53,6 +53,24 @@ def test_recovers_known_parameters_on_a_curved_patch() -> None:
     np.testing.assert_allclose(params, uv, rtol=0, atol=1e-8)
     np.testing.assert_allclose(dist, np.abs(h), rtol=0, atol=1e-10)
     assert not outside.any()
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.05])
+def test_closest_points_are_the_surface_at_the_parameters(offset: float) -> None:
+    """The closest points come from the last Newton iterate (the last step taken to first
+    order, without an evaluation): they must still be S(u, v) to 1e-13 of the patch size
+    (|S_uu| step^2 / 2 for steps below 1e-7), on and off the surface, with the same
+    parameters as project_points."""
+    patch = _curved_patch()
+    _, points, _ = _offset_samples(patch, 20000, offset)
+    points = np.vstack([points, points[:500] + [0.0, 0.0, 0.4], RNG.uniform(-1, 4, (500, 3))])
+    params, dist, outside, closest = closest_points(patch, points)
+    tiny = 1e-13 * float(np.linalg.norm(np.ptp(patch.evaluate(RNG.random(999), RNG.random(999)), axis=0)))
+    np.testing.assert_allclose(closest, patch.evaluate(params[:, 0], params[:, 1]), rtol=0, atol=tiny)
+    np.testing.assert_allclose(dist, np.linalg.norm(points - closest, axis=1), rtol=0, atol=tiny)
+    plain = project_points(patch, points)
+    for a, b in zip(plain, (params, dist, outside), strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_a_crease_gives_a_local_closest_point() -> None:

@@ -225,6 +225,21 @@ def cell_values(
     return out
 
 
+def _cell_breaks(curves: tuple[PiecewiseBezier, ...]) -> NDArray[np.float64]:
+    """The union of the curves' breaks, near-duplicates inside (0, 1) as one: a reversed
+    side's ``1 - 0.8 = 0.19999999999999996`` and ``0.2`` would make a cell of width 3e-17,
+    and every extra cell costs each evaluation a sort. A cluster keeps its largest value,
+    so the cell starting there takes the pieces valid from it on (the sliver before it is
+    the previous cell's, extrapolated by rounding)."""
+    b = np.unique(np.concatenate([c.breaks for c in curves]))
+    last = np.r_[np.diff(b) > _BREAK_MERGE, True]
+    return b[last | (b < _BREAK_MERGE) | (b > 1.0 - _BREAK_MERGE)]
+
+
+#: Breaks closer than this are one in the polynomial cells (see _cell_breaks).
+_BREAK_MERGE = 1e-12
+
+
 class _BooleanSumPatch:
     """``S = sum_k b_k(v) F_k(u) + sum_k b_k(u) G_k(v) - sum_ij b_i(u) b_j(v) C_ij`` (Eq. 5.2).
 
@@ -325,8 +340,7 @@ class _BooleanSumPatch:
         cached = getattr(self, "_cells", None)
         if cached is not None:
             return cached
-        ub = np.unique(np.concatenate([c.breaks for c in self._u_curves]))
-        vb = np.unique(np.concatenate([c.breaks for c in self._v_curves]))
+        ub, vb = _cell_breaks(self._u_curves), _cell_breaks(self._v_curves)
         orders = tuple((i, j) for i in range(4) for j in range(4))
         parts = self._partials(ub[:-1, None], vb[None, :-1], orders)
         fact = np.array([1.0, 1.0, 2.0, 6.0])

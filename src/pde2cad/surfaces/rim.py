@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
@@ -68,7 +69,7 @@ _DENSITY_SAMPLE = 20_000
 #: Loop points a polyline reference is smoothed over (odd).
 REFERENCE_WINDOW = 31
 #: Offsets tried per station by the likelihood search (then refined by a parabola).
-_GRID = 65
+_GRID = 33
 
 
 @dataclass(frozen=True)
@@ -209,7 +210,12 @@ def _stations(
         station_arc = np.array([0.5 * length])
     # Samples near the reference: each with its nearest reference sample and arc position.
     reach = depth + 2.0 * spacing
-    near = np.unique(np.concatenate(tree.query_ball_point(ref, reach, workers=-1)).astype(np.int64))
+    # Balls every reach / 2 along the reference, a little wider, cover the same tube as
+    # balls at every reference sample (half a spacing apart) with ~8x fewer repeated hits.
+    stride = max(1, int(0.5 * reach / max(float(arc[1] - arc[0]), 1e-300)))
+    centres = np.vstack([ref[::stride], ref[-1:]])
+    balls = tree.query_ball_point(centres, 1.04 * reach, workers=-1)
+    near = np.unique(np.concatenate(balls).astype(np.int64))
     if not len(near):
         return None
     p = points[near]
@@ -378,3 +384,84 @@ def onto_surface(
     x, y, h = (rel @ frame.T / np.array([radius, radius, 1.0])).T
     coef, _ = _quadrics(x, y, h, st, 1)
     return at + coef[0, 0] * frame[2]
+
+
+#: Most uniform pieces of a rim side's spline (see :func:`fit_rim_spline`).
+RIM_PIECES = 8
+#: Rounds of parameter correction of a rim side's spline fit.
+_SPLINE_ROUNDS = 3
+
+
+def fit_rim_spline(
+    run: NDArray[np.float64], start: NDArray[np.float64], end: NDArray[np.float64]
+) -> tuple[PiecewiseBezier, float]:
+    """A C2 cubic spline side through ordered rim points ``run`` (m, D), from ``start`` to
+    ``end`` exactly, on 1..``RIM_PIECES`` uniform pieces: the count with the least Bayesian
+    information criterion ``n log(RSS / (m D)) + k log n`` for ``k`` free control-point
+    coordinates and ``n = m D / 2`` independent ones among the ``m D`` data (neighbouring
+    stations share half their window, so their noise is correlated: with ``n = m D`` a
+    noisy flag's sides took 3-6 pieces that followed it).
+
+    A G1 chain of Béziers changes speed at its joints; a bilinear Coons patch blends the
+    side across the whole patch, so a speed jump there draws a crease through the interior
+    that no smooth deformation removes (a held-out wave: 2.8e-4 D inside against 7.7e-5 D
+    for one-piece sides). A spline in one parameter is C2 there. The piece count is not
+    set by a tolerance: rim points scatter more across the rim than in height, and a
+    tolerance loose enough for that scatter let two pieces miss a wave's rim heights by
+    half a spacing. Each fit is least squares on chord-length parameters, corrected
+    ``_SPLINE_ROUNDS`` times by Newton steps to each point's closest parameter.
+
+    Returns
+    -------
+    (PiecewiseBezier, largest distance of a rim point)
+    """
+    seg = np.linalg.norm(np.diff(run, axis=0), axis=1)
+    s0 = np.concatenate([[0.0], np.cumsum(seg)]) / max(float(seg.sum()), 1e-300)
+    count = run.size
+    best: tuple[float, BSpline, NDArray[np.float64], float] | None = None
+    for pieces in range(1, int(np.clip(len(run) - 3, 1, RIM_PIECES)) + 1):
+        breaks = np.linspace(0.0, 1.0, pieces + 1)
+        knots = np.concatenate([[0.0] * 3, breaks, [1.0] * 3])
+        s = s0.copy()
+        for _ in range(_SPLINE_ROUNDS):
+            spline = _held_spline(run, s, knots, start, end)
+            s = _closest_parameters(spline, run, s)
+        miss = np.linalg.norm(spline(s) - run, axis=1)
+        rss = max(float(miss @ miss), 1e-300 * count)
+        score = 0.5 * count * np.log(rss / count) + (pieces + 1) * run.shape[1] * np.log(
+            0.5 * count
+        )
+        if best is None or score < best[0]:
+            best = score, spline, breaks, float(miss.max())
+    assert best is not None
+    _, spline, breaks, error = best
+    values = spline(breaks)
+    values[0], values[-1] = start, end
+    side = PiecewiseBezier.from_hermite(values, spline.derivative()(breaks), breaks)
+    return side, error
+
+
+def _held_spline(
+    run: NDArray[np.float64], s: NDArray[np.float64], knots: NDArray[np.float64],
+    start: NDArray[np.float64], end: NDArray[np.float64],
+) -> BSpline:
+    """Least-squares cubic spline on ``knots`` through ``run`` at parameters ``s``, its end
+    control points held at ``start`` and ``end``."""
+    design = BSpline.design_matrix(np.clip(s, 0.0, 1.0), knots, 3).toarray()
+    rhs = run - np.outer(design[:, 0], start) - np.outer(design[:, -1], end)
+    inner = np.linalg.lstsq(design[:, 1:-1], rhs, rcond=None)[0]
+    return BSpline(knots, np.vstack([start, inner, end]), 3)
+
+
+def _closest_parameters(
+    spline: BSpline, run: NDArray[np.float64], s: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """One Newton step of every point's parameter towards its closest spline point (the
+    corners keep 0 and 1)."""
+    rel = spline(s) - run
+    d1, d2 = spline.derivative(1)(s), spline.derivative(2)(s)
+    slope = np.einsum("ij,ij->i", rel, d1)
+    curve = np.einsum("ij,ij->i", d1, d1) + np.einsum("ij,ij->i", rel, d2)
+    out = np.clip(s - slope / np.where(curve > 0, curve, np.inf), 0.0, 1.0)
+    out[0], out[-1] = 0.0, 1.0
+    return np.maximum.accumulate(out)
