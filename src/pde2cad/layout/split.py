@@ -588,11 +588,13 @@ Relayout = Callable[[NDArray[np.int64]], Layout]
 
 
 def _relayouter(
-    points: NDArray[np.float64], first: NDArray[np.int64], crossing: frozenset[tuple[int, int]]
+    points: NDArray[np.float64], first: NDArray[np.int64], crossing: frozenset[tuple[int, int]],
+    adjacent: set[tuple[int, int]],
 ) -> Relayout:
     """A function building the layout of new labels of ``points`` whose segments cross where
     the input segments they hold (``first``, at least ``SOURCE_SHARE`` of their points)
-    did: a piece of the teapot's handle still crosses the body, wherever it lies."""
+    did, unless two of those shared a border (``adjacent``): a piece of the teapot's handle
+    still crosses the body, wherever it lies."""
 
     def relayout(labels: NDArray[np.int64]) -> Layout:
         if not crossing:
@@ -602,8 +604,12 @@ def _relayouter(
         for label in present.tolist():
             ids, counts = np.unique(first[labels == label], return_counts=True)
             held[label] = set(ids[counts >= SOURCE_SHARE * counts.sum()].tolist())
+        def pairs(a: int, b: int) -> set[tuple[int, int]]:
+            return {(min(x, y), max(x, y)) for x in held[a] for y in held[b]}
+
+        # Crossing where some input segments they hold crossed and none shared a border.
         known = [(a, b) for i, a in enumerate(present.tolist()) for b in present.tolist()[i + 1:]
-                 if any((min(x, y), max(x, y)) in crossing for x in held[a] for y in held[b])]
+                 if pairs(a, b) & crossing and not pairs(a, b) & adjacent]
         return build_layout(points, labels, check=False, crossing=known)
 
     return relayout
@@ -803,7 +809,7 @@ def split_segments(
         with more than ``MAX_CORNERS`` corners (the message names the label).
     """
     report = SplitReport()
-    relayout = _relayouter(points, labels, layout.crossing)
+    relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency))
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
     out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
