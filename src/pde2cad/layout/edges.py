@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 from scipy.sparse import coo_matrix, identity
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
@@ -67,6 +67,11 @@ POINTS_PER_SPAN = 6
 #: open boundary lies a border's length inside.
 OPEN_REACH = 1.25
 INNER_REACH = 0.5
+#: Edge data whose chord parameters differ from their share of the path along the data by
+#: more than FOLDED_EDGE somewhere are parameterized along the data (points ARC_LINK radii
+#: apart linked).
+FOLDED_EDGE = 0.2
+ARC_LINK = 1.0
 #: Closest-point reparameterization rounds per fit.
 REPARAM_ROUNDS = 3
 #: Border data closer than this many neighbour radii to a rough corner is ignored by the
@@ -274,6 +279,30 @@ def _midline(
         (side_a + side_b[j])[d_ab <= reach] / 2,
         (side_b + side_a[i])[d_ba <= reach] / 2,
     ])
+
+
+def _edge_params(
+    data: NDArray[np.float64], p0: NDArray[np.float64], p1: NDArray[np.float64], radius: float
+) -> NDArray[np.float64]:
+    """First parameters of an edge's data: the projection on the chord between its corners,
+    or, where the edge bends back over itself so that this folds it (the teapot rim's seams
+    run 0.3 over a lip whose ends lie 0.1 apart), the share ``d0 / (d0 + d1)`` of the
+    shortest paths along the data (graph of points ``ARC_LINK`` radii apart) from each end."""
+    chord = p1 - p0
+    t = np.clip((data - p0) @ chord / (chord @ chord), 0.0, 1.0)
+    if len(data) < 8:
+        return t
+    pairs = cKDTree(data).query_pairs(ARC_LINK * radius, output_type="ndarray")
+    if not len(pairs):
+        return t
+    length = np.linalg.norm(data[pairs[:, 0]] - data[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length, (pairs[:, 0], pairs[:, 1])), shape=(len(data),) * 2).tocsr()
+    ends = [int(np.argmin(np.linalg.norm(data - p, axis=1))) for p in (p0, p1)]
+    d0, d1 = dijkstra(graph, directed=False, indices=ends)
+    if not (np.isfinite(d0).all() and np.isfinite(d1).all()):
+        return t
+    arc = d0 / np.maximum(d0 + d1, 1e-300)
+    return arc if np.abs(arc - t).max() > FOLDED_EDGE else t
 
 
 def _open_flags(layout: Layout, corners: NDArray[np.float64]) -> NDArray[np.bool_] | None:
@@ -635,7 +664,7 @@ def build_edges(
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
-        t = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+        t = _edge_params(pts_e, p0, p1, radius)
         trim = (np.linalg.norm(pts_e - p0, axis=1) > END_TRIM * radius) & (
             np.linalg.norm(pts_e - p1, axis=1) > END_TRIM * radius
         )
@@ -702,7 +731,7 @@ def build_edges(
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
-        params[key] = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+        params[key] = _edge_params(pts_e, p0, p1, radius)
     legs = _leg_bases(corners, normals, smooth, users, sheets)
     splines = _joint_fit(data, params, spans, corners, legs, pairs, FAIRNESS)
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is
