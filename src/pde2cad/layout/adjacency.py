@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -129,6 +130,31 @@ FRAME_ACCEPT = 0.2
 #: UNFOLD_NEIGHBOURS nearest own points within the radius.
 UNFOLD_NEIGHBOURS = 12
 FRAME_DIRECTIONS = 600
+#: Distances along the surface: shortest paths in the graph of each point's
+#: GEODESIC_NEIGHBOURS nearest points within the radius, from GEODESIC_CHUNK sources at a time.
+GEODESIC_NEIGHBOURS = 12
+GEODESIC_CHUNK = 128
+#: Corner candidates within the linkage distance are linked only when a path along the
+#: surface joins them within GEODESIC_SLACK x their distance (or that + half a radius): the
+#: teapot rim's inner and outer corners lie 0.1 apart in space, 0.3 along the surface
+#: (candidates 2.2 radii apart, 4.1 along the surface, at 112k points).
+GEODESIC_SLACK = 1.4
+#: ... and a candidate on the open boundary with one that is not only within MIXED_LINK
+#: radii (the rim's inner and outer candidates: >= 1.9 radii apart at 112k points).
+MIXED_LINK = 1.5
+#: Two segments whose border is no boundary of one of them cross or touch (the teapot's
+#: handle and spout pierce its body): one-sidedness (see :func:`_one_sided`) below
+#: EDGE_SHARE, from EDGE_NEIGHBOURS neighbours of up to EDGE_SAMPLES border points, counting
+#: those within EDGE_SLAB (|height| / distance) of the tangent plane, and the other
+#: segment rising off that plane by EDGE_RISE. Measured at 112k points: one-sidedness
+#: 0.35-0.87 at the teapot's borders, 0.10-0.25 where handle and spout pierce the body.
+EDGE_SHARE = 0.3
+EDGE_SLAB = 0.5
+EDGE_RISE = 0.3
+#: The tangent plane: PCA of the segment's NORMAL_NEIGHBOURS nearest points.
+NORMAL_NEIGHBOURS = 12
+EDGE_NEIGHBOURS = 64
+EDGE_SAMPLES = 64
 
 
 @dataclass(frozen=True)
@@ -173,6 +199,9 @@ class Layout:
         Corners of two segments kept all the same: sharp turns of a border (where a merged
         segment meets its neighbour at a corner of the neighbour's), found by
         :func:`~pde2cad.layout.split.split_segments`.
+    crossing : frozenset of (int, int)
+        Pairs ``(a, b)``, ``a < b``, that cross or touch without sharing a boundary (the
+        teapot's spout piercing its body): no border, no corners from each other.
     """
 
     labels_present: NDArray[np.int64]
@@ -187,6 +216,11 @@ class Layout:
     tree: cKDTree | None = field(default=None, repr=False, compare=False)
     open_corners: NDArray[np.bool_] | None = None
     sharp_corners: NDArray[np.bool_] | None = None
+    crossing: frozenset[tuple[int, int]] = frozenset()
+
+    def crossed(self, label: int) -> set[int]:
+        """The segments that cross or touch ``label`` without a shared boundary."""
+        return {b if a == label else a for a, b in self.crossing if label in (a, b)}
 
 
 # --------------------------------------------------------------------------- checks
@@ -358,6 +392,221 @@ def _check_segments(
         )
 
 
+# --------------------------------------------------------------------------- on the surface
+def _local_graph(
+    pts: NDArray[np.float64], tree: cKDTree, centres: NDArray[np.float64], reach: float,
+    radius: float, k: int = GEODESIC_NEIGHBOURS,
+) -> tuple[NDArray[np.int64], coo_matrix]:
+    """The cloud points within ``reach`` of any of ``centres`` and their k-NN graph (edges
+    at most ``radius`` long, both ways): its shortest paths run along the surface."""
+    rows = tree.query_ball_point(centres, reach)
+    local = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in rows] + [np.zeros(0, np.int64)]))
+    at = np.full(len(pts), -1, dtype=np.int64)
+    at[local] = np.arange(len(local))
+    dist, idx = tree.query(pts[local], k=min(k + 1, len(pts)), distance_upper_bound=radius)
+    ok = idx < len(pts)
+    j = np.where(ok, at[np.where(ok, idx, 0)], -1)
+    ok &= j >= 0
+    i = np.repeat(np.arange(len(local)), idx.shape[1]).reshape(idx.shape)
+    graph = coo_matrix((dist[ok], (i[ok], j[ok])), shape=(len(local),) * 2)
+    return local, graph.maximum(graph.T).tocoo() if len(local) else graph
+
+
+def surface_distances(
+    pts: NDArray[np.float64], tree: cKDTree, sources: NDArray[np.int64],
+    targets: NDArray[np.int64], reach: float, radius: float,
+) -> NDArray[np.float64]:
+    """Distance along the surface (shortest path in the neighbour graph, hops at most
+    ``radius``) from point ``sources[p]`` to point ``targets[p]``, inf beyond ``reach``.
+
+    A chord across a fold is no path: the teapot's rim turns its 0.3-long cross-section
+    back so that its inner and outer edges lie 0.1 apart in space."""
+    out = np.full(len(sources), np.inf)
+    if not len(sources):
+        return out
+    local, graph = _local_graph(pts, tree, pts[np.unique(sources)], reach, radius)
+    csr = graph.tocsr()
+    at = np.full(len(pts), -1, dtype=np.int64)
+    at[local] = np.arange(len(local))
+    src, inverse = np.unique(at[sources], return_inverse=True)
+    dst = at[targets]
+    for lo in range(0, len(src), GEODESIC_CHUNK):
+        chunk = src[lo : lo + GEODESIC_CHUNK]
+        dist = dijkstra(csr, indices=chunk, limit=reach)
+        pick = (inverse >= lo) & (inverse < lo + len(chunk)) & (dst >= 0)
+        out[pick] = dist[inverse[pick] - lo, dst[pick]]
+    return out
+
+
+def _run_span(border: NDArray[np.float64], radius: float) -> float:
+    """Bounding-box diagonal of the largest run of border points (linked within ``radius``):
+    two diagonal patches of a tube's 2 x 2 grid touch at two points on opposite sides."""
+    pairs = cKDTree(border).query_pairs(radius, output_type="ndarray")
+    comp = _components(len(border), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))
+    run = border[comp == np.bincount(comp).argmax()]
+    return float(np.linalg.norm(run.max(axis=0) - run.min(axis=0)))
+
+
+def _surface_span(
+    pts: NDArray[np.float64], tree: cKDTree, members: NDArray[np.int64], radius: float
+) -> float:
+    """Length along the surface of a set of points (a border band): the largest path from
+    the point farthest from its first point (two sweeps), at most 2 x ``BORDER_SPAN`` radii."""
+    reach = 2 * BORDER_SPAN * radius
+    start = members[:1]
+    for _ in range(2):
+        dist = surface_distances(pts, tree, np.repeat(start, len(members)), members, reach, radius)
+        if not np.isfinite(dist).any():
+            return 0.0
+        far = int(np.argmax(np.where(np.isfinite(dist), dist, -1.0)))
+        span, start = float(dist[far]), members[far : far + 1]
+    return span
+
+
+def surface_reach(
+    pts: NDArray[np.float64], tree: cKDTree, centres: NDArray[np.float64], reach: float,
+    radius: float,
+) -> list[NDArray[np.int64]]:
+    """For each centre, the cloud points within ``reach`` of it along the surface (from its
+    nearest cloud point; see :func:`surface_distances`)."""
+    if not len(centres):
+        return []
+    local, graph = _local_graph(pts, tree, centres, reach, radius)
+    csr = graph.tocsr()
+    at = np.full(len(pts), -1, dtype=np.int64)
+    at[local] = np.arange(len(local))
+    gap, seed = tree.query(centres)
+    out: list[NDArray[np.int64]] = []
+    for lo in range(0, len(centres), GEODESIC_CHUNK):
+        dist = dijkstra(csr, indices=at[seed[lo : lo + GEODESIC_CHUNK]], limit=reach)
+        out += [local[row + g <= reach] for row, g in zip(dist, gap[lo : lo + GEODESIC_CHUNK])]
+    return out
+
+
+def _borders(
+    pts: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], present: NDArray[np.int64],
+    near: NDArray[np.int64], idx: NDArray[np.int64], valid: NDArray[np.bool_], radius: float,
+) -> tuple[dict[tuple[int, int], int], dict[tuple[int, int], NDArray[np.float64]],
+           NDArray[np.bool_], list[tuple[int, int]], dict[tuple[int, int], tuple[int, NDArray[np.float64]]]]:
+    """Step 2 of the module docstring: adjacency, border points and whether each point is one
+    (from the ``valid`` neighbours ``idx`` of the points ``near``); the pairs that cross or
+    touch instead of sharing a boundary (:func:`_crossing`), left out, then ``(-1, -1)`` and
+    the pairs where the surface goes on past the border (one-sidedness below
+    ``EDGE_SHARE``); and the pairs left out as too short (their edge counts and border
+    points)."""
+    # Cross edges, each unordered point pair once.
+    k = idx.shape[1]
+    rows = np.repeat(near, k)
+    cols = idx.reshape(-1)
+    cross = valid.reshape(-1) & (lab[rows] != lab[cols])
+    i, j = rows[cross], cols[cross]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    edge = np.unique(i * len(pts) + j)
+    i, j = edge // len(pts), edge % len(pts)
+    la, lb = np.minimum(lab[i], lab[j]), np.maximum(lab[i], lab[j])
+
+    # Border points per label pair: both ends of every cross edge, each point once per pair.
+    n_lab = len(present)
+    pair = np.searchsorted(present, la) * n_lab + np.searchsorted(present, lb)
+    pt = np.concatenate([i, j])
+    key = np.unique(np.concatenate([pair, pair]) * len(pts) + pt)
+    key_pair, key_pt = key // len(pts), key % len(pts)
+    adjacency: dict[tuple[int, int], int] = {}
+    borders: dict[tuple[int, int], NDArray[np.float64]] = {}
+    crossing: list[tuple[int, int]] = []
+    short: dict[tuple[int, int], tuple[int, NDArray[np.float64]]] = {}
+    weak: list[tuple[int, int]] = []
+    edge_count = np.bincount(pair, minlength=n_lab * n_lab)
+    starts = np.searchsorted(key_pair, np.arange(n_lab * n_lab + 1))
+    for p in np.flatnonzero(edge_count):
+        members = key_pt[starts[p] : starts[p + 1]]
+        border = pts[members]
+        span = _run_span(border, radius)
+        if span <= BORDER_SPAN * radius:
+            # A border curving round a fold (the teapot rim's seams) is longer than its box.
+            span = _surface_span(pts, tree, members, radius)
+        a, b = int(present[p // n_lab]), int(present[p % n_lab])
+        share, rise = _crossing(pts, tree, lab, members, a, b)
+        if share < EDGE_SHARE:
+            weak.append((a, b))
+        if share < EDGE_SHARE and rise >= EDGE_RISE:
+            crossing.append((a, b))
+        elif span > BORDER_SPAN * radius:
+            adjacency[(a, b)] = int(edge_count[p])
+            borders[(a, b)] = border
+        else:
+            short[(a, b)] = (int(edge_count[p]), border)
+    is_border = np.zeros(len(pts), dtype=bool)
+    is_border[pt] = True
+    return adjacency, borders, is_border, crossing + [(-1, -1)] + weak, short
+
+
+def _crossing(
+    pts: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], members: NDArray[np.int64],
+    a: int, b: int,
+) -> tuple[float, float]:
+    """Whether segments ``a`` and ``b`` (border points ``members``) cross or touch instead of
+    sharing a boundary: the smaller one-sidedness of the two (:func:`_one_sided`; below
+    ``EDGE_SHARE`` the surface goes on past their border on one side) and the larger rise of
+    one off the other's tangent plane (``EDGE_RISE`` or more where they cross: where a
+    smooth surface goes on past a border through other segments, as past the corner that
+    two diagonal patches of a 2 x 2 grid touch at, neither rises)."""
+    (share_a, rise_a), (share_b, rise_b) = (
+        _one_sided(pts, tree, lab, members, x, y) for x, y in ((a, b), (b, a))
+    )
+    return min(share_a, share_b), max(rise_a, rise_b)
+
+
+def _one_sided(
+    pts: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], members: NDArray[np.int64],
+    label: int, other: int,
+) -> tuple[float, float]:
+    """How one-sided the surface is around a segment's border points with ``other``, and how
+    far ``other``'s points rise off its tangent plane there (|height| / distance; medians
+    over up to ``EDGE_SAMPLES`` of its ``members``, from their ``EDGE_NEIGHBOURS`` nearest
+    points).
+
+    One-sidedness: the offset of the neighbours that are not ``other``'s and lie within
+    ``EDGE_SLAB`` of the segment's tangent plane (in that plane), over their mean distance.
+    About 0.6 where the surface ends at the border (a half disc), near 0 where it goes on
+    past it: the teapot's spout pierces its body, whose points (and its neighbour's, where the
+    spout crosses a body seam) lie all round the piercing."""
+    own = members[lab[members] == label]
+    own = own[np.linspace(0, len(own) - 1, min(len(own), EDGE_SAMPLES)).astype(np.int64)]
+    if not len(own):
+        return 0.0, 0.0
+    _, hood = tree.query(pts[own], k=min(EDGE_NEIGHBOURS, len(pts)))
+    rel = pts[hood] - pts[own][:, None]
+
+    def normals(mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+        # From the nearest few only: a hood as wide as the teapot's rim or spout is bent.
+        m = (mask & (np.cumsum(mask, axis=1) <= NORMAL_NEIGHBOURS))[..., None]
+        mean = (rel * m).sum(axis=1) / np.maximum(m.sum(axis=1), 1)
+        centred = (rel - mean[:, None]) * m
+        return np.linalg.eigh(np.einsum("pki,pkj->pij", centred, centred))[1][:, :, 0]
+
+    normal = normals(lab[hood] == label)
+    height = np.einsum("pki,pi->pk", rel, normal)
+    dist = np.linalg.norm(rel, axis=2)
+    w = ((lab[hood] != other) & (np.abs(height) <= EDGE_SLAB * dist)).astype(float)
+    flat = rel - height[..., None] * normal[:, None]
+    offset = (flat * w[..., None]).sum(axis=1) / np.maximum(w.sum(axis=1), 1)[:, None]
+    size = (dist * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1)
+    share = float(np.median(np.linalg.norm(offset, axis=1) / np.maximum(size, 1e-300)))
+    # Rise over the neighbours beyond half the hood (noise tilts the nearest), less the
+    # segment's own there (the noise level).
+    far = dist >= 0.5 * dist[:, -1:]
+    slope = np.abs(height) / np.maximum(dist, 1e-300)
+    theirs = (lab[hood] == other) & far
+    mine = (lab[hood] == label) & far
+    enough = (theirs.sum(axis=1) >= NORMAL_NEIGHBOURS // 2) & (mine.sum(axis=1) >= NORMAL_NEIGHBOURS // 2)
+    if not enough.any():
+        return share, 0.0
+    rise = np.nanmedian(np.where(theirs, slope, np.nan)[enough], axis=1)
+    base = np.nanmedian(np.where(mine, slope, np.nan)[enough], axis=1)
+    return share, float(np.median(rise - base))
+
+
 # --------------------------------------------------------------------------- loops
 def _drop_short_runs(
     state: NDArray[np.bool_], step_len: NDArray[np.float64], min_len: float, value: bool
@@ -456,8 +705,9 @@ def _unfold(
 ) -> NDArray[np.float64] | None:
     """2D coordinates of a segment that fits no plane (a strip folded across its width, like
     the teapot's rim): the coordinate ``along`` its main axis, and the geodesic distance
-    (shortest path in its own neighbour graph) from its border with the segment it shares
-    the most border points with. None when it has no border or the graph falls apart."""
+    (shortest path in its own neighbour graph) from one run of its border with the segment
+    it shares the most border points with. None when it has no border or the graph falls
+    apart."""
     own = pts[members]
     dist, idx = cKDTree(own).query(own, k=UNFOLD_NEIGHBOURS + 1, distance_upper_bound=radius)
     ok = np.isfinite(dist[:, 1:])
@@ -475,6 +725,11 @@ def _unfold(
     values, counts = np.unique(other_lab, return_counts=True)
     seeds = border[(other == values[counts.argmax()]).any(axis=1)]
     graph = coo_matrix((dist[:, 1:][ok], (rows, cols)), shape=(len(members),) * 2).tocsr()
+    # One run of that border: from both seams of a half tube (the teapot's handle halves
+    # meet along two), the distance would fold the strip at its middle.
+    link = cKDTree(own[seeds]).query_pairs(2 * radius, output_type="ndarray")
+    comp = _components(len(seeds), link[:, 0].astype(np.int64), link[:, 1].astype(np.int64))
+    seeds = seeds[comp == np.bincount(comp).argmax()]
     geo = dijkstra(graph, directed=False, indices=seeds, min_only=True)
     if not np.isfinite(geo).all():
         return None
@@ -555,6 +810,7 @@ def build_layout(
     k: int = 12,
     min_points: int = 50,
     check: bool = True,
+    crossing: Iterable[tuple[int, int]] = (),
 ) -> Layout:
     """Adjacency, borders, open boundary and corners of a segmented point cloud.
 
@@ -569,6 +825,9 @@ def build_layout(
         Fewest points a segment may have.
     check : bool
         Require 3 or 4 corners per segment (a patch is 3- or 4-sided).
+    crossing : iterable of (int, int)
+        Label pairs known to cross or touch without sharing a boundary (pieces of segments
+        that an earlier layout found crossing), besides those found here.
 
     Returns
     -------
@@ -588,6 +847,7 @@ def build_layout(
     per segment (on a band of ~25 % of its points, the segments on parallel threads).
     """
     pts, lab = _inputs(points, labels)
+    known = list(crossing)
     if k < 3:
         raise InputError(f"k must be >= 3 neighbours, got {k}")
     present, counts = np.unique(lab, return_counts=True)
@@ -604,37 +864,34 @@ def build_layout(
     dist, idx = dist[:, 1:], idx[:, 1:].astype(np.int64)
     valid = dist <= radius
 
-    # Cross edges, each unordered point pair once.
-    rows = np.repeat(near, k)
-    cols = idx.reshape(-1)
-    cross = valid.reshape(-1) & (lab[rows] != lab[cols])
-    i, j = rows[cross], cols[cross]
-    i, j = np.minimum(i, j), np.maximum(i, j)
-    edge = np.unique(i * len(pts) + j)
-    i, j = edge // len(pts), edge % len(pts)
-    la, lb = np.minimum(lab[i], lab[j]), np.maximum(lab[i], lab[j])
-
-    # Border points per label pair: both ends of every cross edge, each point once per pair.
-    n_lab = len(present)
-    pair = np.searchsorted(present, la) * n_lab + np.searchsorted(present, lb)
-    pair_of_pt = np.concatenate([pair, pair])
-    pt = np.concatenate([i, j])
-    key = np.unique(pair_of_pt * len(pts) + pt)
-    key_pair, key_pt = key // len(pts), key % len(pts)
-    adjacency: dict[tuple[int, int], int] = {}
-    borders: dict[tuple[int, int], NDArray[np.float64]] = {}
-    edge_count = np.bincount(pair, minlength=n_lab * n_lab)
-    starts = np.searchsorted(key_pair, np.arange(n_lab * n_lab + 1))
-    for p in np.flatnonzero(edge_count):
-        border = pts[key_pt[starts[p] : starts[p + 1]]]
-        span = float(np.linalg.norm(border.max(axis=0) - border.min(axis=0)))
-        if span > BORDER_SPAN * radius:
-            a, b = int(present[p // n_lab]), int(present[p % n_lab])
-            adjacency[(a, b)] = int(edge_count[p])
-            borders[(a, b)] = border
-
-    is_border = np.zeros(len(pts), dtype=bool)
-    is_border[pt] = True
+    adjacency, borders, is_border, crossing, short = _borders(pts, tree, lab, present, near, idx, valid, radius)
+    weak = crossing[crossing.index((-1, -1)) + 1 :]
+    crossing = crossing[: crossing.index((-1, -1))] + [
+        (a, b) for a, b in known if a in present and b in present
+    ]
+    cut = np.zeros((len(present),) * 2, dtype=bool)
+    if crossing:
+        # Segments that cross or touch without sharing a boundary (the teapot's handle and
+        # spout pierce its body): no border, their points are no border points either.
+        rank = np.searchsorted(present, lab)
+        for a, b in crossing:
+            cut[np.searchsorted(present, a), np.searchsorted(present, b)] = True
+        cut |= cut.T
+        # ... nor with the neighbours of those: where the handle's end crosses a seam of
+        # the body, one side of it may read as a touch in the plane (no rise).
+        adj = np.zeros_like(cut)
+        for a, b in adjacency:
+            adj[np.searchsorted(present, a), np.searchsorted(present, b)] = True
+        adj &= ~cut
+        adj |= adj.T
+        spread = (adj.astype(np.int64) @ cut.astype(np.int64)) > 0
+        # (unless they share a border that ends the surface on both sides).
+        loose = np.zeros_like(cut)
+        for a, b in weak:
+            loose[np.searchsorted(present, a), np.searchsorted(present, b)] = True
+        cut |= (spread | spread.T) & (~adj | loose | loose.T)
+        valid &= ~cut[rank[near][:, None], rank[idx]]
+        adjacency, borders, is_border, _, short = _borders(pts, tree, lab, present, near, idx, valid, radius)
 
     # (a) points whose neighbourhood (with themselves) holds >= 3 labels ...
     own = lab[near]
@@ -715,15 +972,25 @@ def build_layout(
         row = np.repeat(np.arange(len(cand)), k + 1)
         hit = hood_idx.reshape(-1) < len(pts)
         seen[row[hit], np.searchsorted(present, lab[hood_idx.reshape(-1)[hit]])] = True
+        # Not the segments its own crosses: the spout's rim corners are none of the body's.
+        seen &= ~cut[np.searchsorted(present, lab[cand])]
     # ... and the segments adjacent to those (a sparse junction's candidates can miss one).
     near_seg = np.eye(len(present), dtype=bool)
     for a, b in adjacency:
         ia, ib = np.searchsorted(present, [a, b])
         near_seg[ia, ib] = near_seg[ib, ia] = True
     corners, open_corners, touches = _cluster(
-        pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius, on_open, seen, near_seg
+        pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius, on_open, seen, near_seg,
+        radius,
     )
-    segment_corners = _assign(tree, lab, present, corners, CLUSTER_FACTOR * radius, touches)
+    segment_corners = _assign(tree, lab, present, corners, CLUSTER_FACTOR * radius, touches, radius)
+    # A border too short for the span test is one all the same where the two segments share
+    # two distinct corners, its ends (the teapot rim's 0.3-long seams, sparsely sampled).
+    for (a, b), (count, border) in short.items():
+        common = sorted(set(segment_corners[a].tolist()) & set(segment_corners[b].tolist()))
+        if len(common) == 2 and np.linalg.norm(corners[common[0]] - corners[common[1]]) >= CLUSTER_FACTOR * radius:
+            adjacency[(a, b)] = count
+            borders[(a, b)] = border
     if check:
         for label, which in segment_corners.items():
             if len(which) not in (3, 4):
@@ -743,6 +1010,9 @@ def build_layout(
         loops=loops,
         tree=tree,
         open_corners=open_corners,
+        crossing=frozenset(
+            (int(present[i]), int(present[j])) for i, j in zip(*np.nonzero(np.triu(cut)))
+        ),
     )
 
 
@@ -780,6 +1050,7 @@ def _cluster(
     merge: float = 0.0, mark: NDArray[np.bool_] | None = None,
     seen: NDArray[np.bool_] | None = None,
     near_seg: NDArray[np.bool_] | None = None,
+    radius: float | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_]]:
     """One corner per cluster of candidate points (single linkage within ``dist``, then
     clusters whose centroids lie within ``merge`` joined; either only when related, see
@@ -804,6 +1075,10 @@ def _cluster(
         or is adjacent to: two corners
         of unrelated segments, such as the lid's and the rim's of the Utah teapot across
         their 0.1 gap, are no ends of one short border.
+    radius : float, optional
+        The neighbour radius: when given, candidates are linked only when a path along the
+        surface joins them within ``GEODESIC_SLACK`` x their distance
+        (:func:`surface_distances`).
 
     Returns
     -------
@@ -825,6 +1100,15 @@ def _cluster(
         # Linked only when related (see ``near_seg``), like the merge below.
         reach_of = (seen.astype(np.int64) @ near_seg.astype(np.int64)) > 0
         pairs = pairs[(seen[pairs[:, 0]] & reach_of[pairs[:, 1]]).any(axis=1)]
+    if len(pairs) and radius is not None:
+        along = surface_distances(
+            pts, tree, cand[pairs[:, 0]], cand[pairs[:, 1]], GEODESIC_SLACK * dist, radius
+        )
+        chord = np.linalg.norm(pts[cand[pairs[:, 0]]] - pts[cand[pairs[:, 1]]], axis=1)
+        keep = along <= np.maximum(GEODESIC_SLACK * chord, chord + 0.5 * radius)
+        # An open-boundary candidate and another (see the merge below) only when close.
+        keep &= (mark[pairs[:, 0]] == mark[pairs[:, 1]]) | (chord <= MIXED_LINK * radius)
+        pairs = pairs[keep]
     comp = _components(len(cand), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64))
 
     def centroids(comp: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -866,14 +1150,19 @@ def _assign(
     corners: NDArray[np.float64],
     dist: float,
     touches: NDArray[np.bool_] | None = None,
+    radius: float | None = None,
 ) -> dict[int, NDArray[np.int64]]:
     """Corners within ``dist`` of at least one point of each segment (and, with ``touches``,
     (C, S) bool, among the segments the corner's candidates touch or that are adjacent to
     those: a corner of the teapot's rim lies within ``dist`` of the lid across their gap,
-    but is none of the lid's)."""
+    but is none of the lid's). With ``radius``, ``dist`` is measured along the surface
+    (:func:`surface_reach`): the rim's inner corners are no corners of the body 0.1 below."""
     out: dict[int, list[int]] = {int(label): [] for label in present}
     if len(corners):
-        near = tree.query_ball_point(corners, dist)
+        if radius is None:
+            near = tree.query_ball_point(corners, dist)
+        else:
+            near = surface_reach(tree.data, tree, corners, dist, radius)
         for c, rows in enumerate(near):  # one small list per corner, not per point
             for label in np.unique(lab[np.asarray(rows, dtype=np.int64)]):
                 if touches is None or touches[c, np.searchsorted(present, label)]:

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 from scipy.sparse import coo_matrix, identity
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
@@ -65,6 +66,12 @@ POINTS_PER_SPAN = 6
 #: edge went missing). Below BORDER_SPAN / CLUSTER_FACTOR = 1.6: a corner that far from the
 #: open boundary lies a border's length inside.
 OPEN_REACH = 1.25
+INNER_REACH = 0.5
+#: Edge data whose chord parameters differ from their share of the path along the data by
+#: more than FOLDED_EDGE somewhere are parameterized along the data (points ARC_LINK radii
+#: apart linked).
+FOLDED_EDGE = 0.2
+ARC_LINK = 1.0
 #: Closest-point reparameterization rounds per fit.
 REPARAM_ROUNDS = 3
 #: Border data closer than this many neighbour radii to a rough corner is ignored by the
@@ -224,16 +231,104 @@ def filter_corners(
     return layout.corners[keep_ids].copy(), seg
 
 
+def _border_runs(
+    border: NDArray[np.float64], corners: NDArray[np.float64], common: list[int], a: int,
+    b: int, gap: float,
+) -> list[tuple[tuple[int, int], NDArray[np.float64]]]:
+    """The edges two segments share: their border points with the two ``common`` corners it
+    ends at; where they share 4 (the two halves of a tube, meeting along two borders), each
+    connected run of the border (points ``gap`` apart) with the 2 corners nearest its ends;
+    none where they share fewer than 2."""
+    if len(common) == 2:
+        return [((common[0], common[1]), border)]
+    if len(common) < 2:
+        # Diagonal pieces of a grid touching at a corner (a wide contact where the surface
+        # bends tightly): no edge; a real side left without one fails the side loop.
+        return []
+    if len(common) == 4:
+        pairs = cKDTree(border).query_pairs(gap, output_type="ndarray")
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(border),) * 2)
+        comp = connected_components(graph, directed=False)[1]
+        big = np.argsort(np.bincount(comp))[::-1][:2]
+        runs = [border[comp == c] for c in big]
+        near = np.array([[cKDTree(run).query(corners[c])[0] for c in common] for run in runs])
+        own = [tuple(sorted(np.asarray(common)[np.argsort(row)[:2]].tolist())) for row in near]
+        if len(runs) == 2 and len(set(own[0]) | set(own[1])) == 4:
+            return [((int(e[0]), int(e[1])), run) for e, run in zip(own, runs)]
+    raise InputError(
+        f"segments {a} and {b} touch but share {len(common)} corners (need the 2 ends of "
+        "each common edge); a border ending without a corner cannot become a patch side — "
+        "split one of them"
+    )
+
+
+def _midline(
+    border: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], a: int, b: int,
+    reach: float,
+) -> NDArray[np.float64]:
+    """Edge data of a shared edge: the midpoints of the border points of either segment and
+    their nearest across (within ``reach``)."""
+    _, idx = tree.query(border)
+    side_a = border[lab[idx] == a]
+    side_b = border[lab[idx] == b]
+    if len(side_a) < 2 or len(side_b) < 2:
+        raise InputError(f"segments {a} and {b}: border too thin to fit an edge")
+    d_ab, j = cKDTree(side_b).query(side_a)
+    d_ba, i = cKDTree(side_a).query(side_b)
+    return np.vstack([
+        (side_a + side_b[j])[d_ab <= reach] / 2,
+        (side_b + side_a[i])[d_ba <= reach] / 2,
+    ])
+
+
+def _edge_params(
+    data: NDArray[np.float64], p0: NDArray[np.float64], p1: NDArray[np.float64], radius: float
+) -> NDArray[np.float64]:
+    """First parameters of an edge's data: the projection on the chord between its corners,
+    or, where the edge bends back over itself so that this folds it (the teapot rim's seams
+    run 0.3 over a lip whose ends lie 0.1 apart), the share ``d0 / (d0 + d1)`` of the
+    shortest paths along the data (graph of points ``ARC_LINK`` radii apart) from each end."""
+    chord = p1 - p0
+    t = np.clip((data - p0) @ chord / (chord @ chord), 0.0, 1.0)
+    if len(data) < 8:
+        return t
+    pairs = cKDTree(data).query_pairs(ARC_LINK * radius, output_type="ndarray")
+    if not len(pairs):
+        return t
+    length = np.linalg.norm(data[pairs[:, 0]] - data[pairs[:, 1]], axis=1)
+    graph = coo_matrix((length, (pairs[:, 0], pairs[:, 1])), shape=(len(data),) * 2).tocsr()
+    ends = [int(np.argmin(np.linalg.norm(data - p, axis=1))) for p in (p0, p1)]
+    d0, d1 = dijkstra(graph, directed=False, indices=ends)
+    if not (np.isfinite(d0).all() and np.isfinite(d1).all()):
+        return t
+    arc = d0 / np.maximum(d0 + d1, 1e-300)
+    return arc if np.abs(arc - t).max() > FOLDED_EDGE else t
+
+
+def _open_flags(layout: Layout, corners: NDArray[np.float64]) -> NDArray[np.bool_] | None:
+    """Whether each of the (filtered) ``corners`` is one the layout put on the open
+    boundary; None when the layout does not say."""
+    if layout.open_corners is None or not len(corners):
+        return None
+    dist, idx = cKDTree(layout.corners).query(corners)
+    return np.asarray(layout.open_corners, dtype=bool)[idx] & (dist == 0.0)
+
+
 def _open_runs(
     boundary: NDArray[np.float64], corner_xyz: NDArray[np.float64], corner_ids: list[int],
-    gap: float,
+    gap: float, on_open: NDArray[np.bool_] | None = None,
 ) -> list[tuple[int, int, NDArray[np.float64]]]:
     """Runs of a segment's open-boundary loop between consecutive corners near it (within
-    ``OPEN_REACH x gap``: the loop can be sparse at a rim corner)."""
+    ``OPEN_REACH x gap``: the loop can be sparse at a rim corner). With ``on_open`` (whether
+    the layout put each corner on the open boundary), a corner it did not is near only within
+    ``INNER_REACH x gap``: the teapot rim's outer corners lie 1.9 radii from its inner rim
+    in space (across the lip) at 112k points."""
     if len(boundary) < 2:
         return []
     dist, where = cKDTree(boundary).query(corner_xyz)
     near = dist <= OPEN_REACH * gap
+    if on_open is not None:
+        near &= on_open | (dist <= INNER_REACH * gap)
     if near.sum() < 2:
         return []
     ids = np.asarray(corner_ids)[near]
@@ -529,40 +624,26 @@ def build_edges(
     data: dict[Key, NDArray[np.float64]] = {}
     users: dict[Key, list[int]] = {}
     seg_edges: dict[int, list[Key]] = {label: [] for label in seg_corners}
-    for (a, b), border in layout.borders.items():
+    for (a, b), whole in layout.borders.items():
         common = sorted(set(seg_corners[a]) & set(seg_corners[b]))
-        if len(common) != 2:
-            raise InputError(
-                f"segments {a} and {b} touch but share {len(common)} corners (need the 2 ends "
-                "of their common edge); a segment pair meeting along two borders, or a border "
-                "ending without a corner, cannot become patches — split one of them"
-            )
-        key = key_of(*common)
-        if key in users:
-            raise InputError(
-                f"segments {users[key]} and {[a, b]} all claim the edge between corners {key}; "
-                "check the segmentation near that edge"
-            )
-        _, idx = tree.query(border)
-        side_a = border[lab[idx] == a]
-        side_b = border[lab[idx] == b]
-        if len(side_a) < 2 or len(side_b) < 2:
-            raise InputError(f"segments {a} and {b}: border too thin to fit an edge")
-        d_ab, j = cKDTree(side_b).query(side_a)
-        d_ba, i = cKDTree(side_a).query(side_b)
-        mids = np.vstack([
-            (side_a + side_b[j])[d_ab <= PAIR_REACH * spacing] / 2,
-            (side_b + side_a[i])[d_ba <= PAIR_REACH * spacing] / 2,
-        ])
-        data[key] = mids
-        users[key] = [a, b]
-        seg_edges[a].append(key)
-        seg_edges[b].append(key)
+        for pair_ends, border in _border_runs(whole, corners, common, a, b, CLUSTER_FACTOR * radius):
+            key = key_of(*pair_ends)
+            if key in users:
+                raise InputError(
+                    f"segments {users[key]} and {[a, b]} all claim the edge between corners "
+                    f"{key}; check the segmentation near that edge"
+                )
+            data[key] = _midline(border, tree, lab, a, b, PAIR_REACH * spacing)
+            users[key] = [a, b]
+            seg_edges[a].append(key)
+            seg_edges[b].append(key)
     gap = CLUSTER_FACTOR * radius
+    on_open = _open_flags(layout, corners)
     for label, ids in seg_corners.items():
         boundary = layout.open_boundary.get(label, np.zeros((0, 3)))
         own = None
-        for c0, c1, run in _open_runs(boundary, corners[ids], ids, gap):
+        flags = None if on_open is None else on_open[ids]
+        for c0, c1, run in _open_runs(boundary, corners[ids], ids, gap, flags):
             key = key_of(c0, c1)
             if key in users:
                 continue
@@ -583,7 +664,7 @@ def build_edges(
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
-        t = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+        t = _edge_params(pts_e, p0, p1, radius)
         trim = (np.linalg.norm(pts_e - p0, axis=1) > END_TRIM * radius) & (
             np.linalg.norm(pts_e - p1, axis=1) > END_TRIM * radius
         )
@@ -650,7 +731,7 @@ def build_edges(
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
         chord = p1 - p0
-        params[key] = np.clip((pts_e - p0) @ chord / (chord @ chord), 0.0, 1.0)
+        params[key] = _edge_params(pts_e, p0, p1, radius)
     legs = _leg_bases(corners, normals, smooth, users, sheets)
     splines = _joint_fit(data, params, spans, corners, legs, pairs, FAIRNESS)
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is

@@ -59,10 +59,16 @@ LOOP_COVER = 14
 RING_BINS = 12
 #: Cuts round a ring without corners.
 CUTS = 4
+#: ... or 3 where a piece's side along the shorter loop would be under MIN_SIDE neighbour
+#: radii (the teapot's handle at 112k points: 4.5; its corners merged).
+MIN_SIDE = 6.0
 #: A ring this many times longer across than its pieces are wide is cut across too (at 2,
 #: a quarter torus tube, 2.7 times, went into 3 slices of ~400 points each, and with 0.2 %
 #: noise one of them folded: 71 degrees; uncut it fits at 0.000).
 ASPECT = 3.0
+#: ... but into no more slices than leave RING_PIECE_POINTS points a piece (the teapot's
+#: handle at 112k points: 5 slices of 180-point pieces, whose corners the layout merged).
+RING_PIECE_POINTS = 400
 
 
 def surface_graph(points: NDArray[np.float64]) -> csr_matrix:
@@ -101,9 +107,10 @@ def _surrounds(pts: NDArray[np.float64]) -> bool:
 
 def boundary_loops(
     points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, label: int,
-    radius: float,
+    radius: float, crossed: set[int] | None = None,
 ) -> list[tuple[NDArray[np.int64], bool]]:
-    """Step 1: the boundary loops of a segment.
+    """Step 1: the boundary loops of a segment (next to no segment of ``crossed``: those
+    that cross it, as the teapot's body its spout, see ``Layout.crossing``).
 
     Returns
     -------
@@ -118,7 +125,8 @@ def boundary_loops(
     dist, idx = tree.query(points[members], k=min(BORDER_NEIGHBOURS + 1, len(points)),
                            distance_upper_bound=radius)
     hit = idx < len(points)
-    border = (hit & (labels[np.where(hit, idx, 0)] != label)).any(axis=1)
+    other = labels[np.where(hit, idx, 0)]
+    border = (hit & (other != label) & ~np.isin(other, list(crossed or ()))).any(axis=1)
     own = points[members]
     idx = cKDTree(own).query(own, k=min(OPEN_NEIGHBOURS + 1, len(own)))[1]
     rim = open_gaps(own[idx[:, 1:]] - own[:, None]) > OPEN_GAP
@@ -256,7 +264,10 @@ def _cut_angles(
     c0, c1 = (None if f is None else theta[tree.query(f)[1]] for f in found)
     if c0 is None and c1 is None:
         start = theta[np.searchsorted(members, loops[0][0][0])]
-        c0 = _wrap(start + np.arange(CUTS) * 2 * np.pi / CUTS)
+        # Fewer pieces round a tube too thin for 4 sides the layout can tell apart.
+        shortest = min(_loop_length(points[lp]) for lp, _ in loops)
+        cuts = CUTS if shortest >= CUTS * MIN_SIDE * reach / CLUSTER_FACTOR else 3
+        c0 = _wrap(start + np.arange(cuts) * 2 * np.pi / cuts)
     if c0 is None or (c1 is not None and len(c1) > len(c0)):
         c0 = c1
     assert c0 is not None
@@ -298,7 +309,7 @@ def split_rings(
     junctions, rims = junction_corners(layout, tree, labels)
     out, pieces = labels, {}
     for label in (int(v) for v in layout.labels_present):
-        loops = boundary_loops(points, labels, tree, label, layout.radius)
+        loops = boundary_loops(points, labels, tree, label, layout.radius, layout.crossed(label))
         if len(loops) > 2:
             raise InputError(
                 f"segment {label} has {len(loops)} boundary loops (at most 2, one hole, are "
@@ -311,6 +322,8 @@ def split_rings(
         cut = _cut_angles(points, members, loops, theta, (junctions, rims), reach)
         width = float(np.mean([_loop_length(points[lp]) for lp, _ in loops])) / len(cut[0])
         slices = int(round(length / width)) if length >= ASPECT * width else 1
+        # Pieces too small for the layout to tell their corners apart are worse than long ones.
+        slices = max(1, min(slices, len(members) // (len(cut[0]) * RING_PIECE_POINTS)))
         cell = np.unique(ring_pieces(t, theta, (cut[0], cut[1]), slices), return_inverse=True)[1]
         out = out.copy() if out is labels else out
         start = max(int(out.max()) + 1, first_new)

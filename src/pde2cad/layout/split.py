@@ -49,6 +49,7 @@ Limits: the layout must see the corners; a segment with 3 or more boundary loops
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -61,7 +62,7 @@ from scipy.spatial import cKDTree
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import Layout, build_layout
 from pde2cad.layout.edges import filter_corners
-from pde2cad.layout.rings import split_rings
+from pde2cad.layout.rings import boundary_loops, split_rings
 from pde2cad.surfaces.region import pca_frame
 
 #: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
@@ -94,7 +95,12 @@ REFLEX_ANGLE = 245.0
 #: arccos(REFLEX_COS) of the (counter-clockwise oriented) PCA normal.
 REFLEX_COS = 0.5
 #: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
-MAX_ROUNDS = 6
+MAX_ROUNDS = 12
+#: A tube (merged halves) whose two boundary loops lie closer than NARROW_RING radii (median)
+#: is merged into the neighbour it shares the most border with.
+NARROW_RING = 6.0
+#: A piece holds the input segments that make up this share of its points.
+SOURCE_SHARE = 0.1
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
 IDEAL_ANGLE = {3: 60.0, 4: 90.0}
 
@@ -578,9 +584,40 @@ def _sectors(points: NDArray[np.float64], alone: bool) -> NDArray[np.int64] | No
     return best[1]
 
 
+Relayout = Callable[[NDArray[np.int64]], Layout]
+
+
+def _relayouter(
+    points: NDArray[np.float64], first: NDArray[np.int64], crossing: frozenset[tuple[int, int]],
+    adjacent: set[tuple[int, int]],
+) -> Relayout:
+    """A function building the layout of new labels of ``points`` whose segments cross where
+    the input segments they hold (``first``, at least ``SOURCE_SHARE`` of their points)
+    did, unless two of those shared a border (``adjacent``): a piece of the teapot's handle
+    still crosses the body, wherever it lies."""
+
+    def relayout(labels: NDArray[np.int64]) -> Layout:
+        if not crossing:
+            return build_layout(points, labels, check=False)
+        present = np.unique(labels)
+        held: dict[int, set[int]] = {}
+        for label in present.tolist():
+            ids, counts = np.unique(first[labels == label], return_counts=True)
+            held[label] = set(ids[counts >= SOURCE_SHARE * counts.sum()].tolist())
+        def pairs(a: int, b: int) -> set[tuple[int, int]]:
+            return {(min(x, y), max(x, y)) for x in held[a] for y in held[b]}
+
+        # Crossing where some input segments they hold crossed and none shared a border.
+        known = [(a, b) for i, a in enumerate(present.tolist()) for b in present.tolist()[i + 1:]
+                 if pairs(a, b) & crossing and not pairs(a, b) & adjacent]
+        return build_layout(points, labels, check=False, crossing=known)
+
+    return relayout
+
+
 def _merge_tubes(
     points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
-    report: SplitReport,
+    report: SplitReport, relayout: Relayout,
 ) -> tuple[NDArray[np.int64], Layout]:
     """Labels and layout with each pair of neighbours that share more than the 2 corners of
     one edge merged, when together they form a segment without corners (two halves of a
@@ -592,10 +629,108 @@ def _merge_tubes(
         if len(set(seg_corners[a]) & set(seg_corners[b])) <= 2:
             continue
         trial = np.where(labels == b, a, labels)
-        trial_layout = build_layout(points, trial, check=False)
+        trial_layout = relayout(trial)
         if len(filter_corners(trial_layout, tree, trial)[1][a]) == 0:
             labels, layout = trial, trial_layout
             report.merged[int(b)] = int(a)
+    return labels, layout
+
+
+def _merge_tube_chain(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, relayout: Relayout,
+) -> tuple[NDArray[np.int64], Layout] | None:
+    """Labels and layout with every pair of neighbours that share more than 2 corners merged
+    at once, when each union then has two boundary loops: a tube in halves along a chain of sections
+    (the teapot's handle: two sections of two halves, whose corners are where the 4 meet);
+    :func:`~pde2cad.layout.rings.split_rings` then cuts the tubes so their cuts meet. None
+    when there is no such pair or a union is no tube."""
+    _, seg_corners = filter_corners(layout, tree, labels)
+    pairs = [(a, b) for a, b in sorted(layout.borders)
+             if len(set(seg_corners[a]) & set(seg_corners[b])) > 2]
+    if not pairs:
+        return None
+    trial = labels.copy()
+    into: dict[int, int] = {}
+    for a, b in pairs:
+        a, b = into.get(a, a), into.get(b, b)
+        if a != b:
+            trial[trial == b] = a
+            into.update({k: a for k, v in into.items() if v == b})
+            into[b] = a
+    trial_layout = relayout(trial)
+    for _ in range(2):
+        unions = sorted(set(into.values()))
+        loops = {a: len(boundary_loops(points, trial, tree, a, trial_layout.radius,
+                                       trial_layout.crossed(a))) for a in unions}
+        if all(n == 2 for n in loops.values()):
+            break
+        for a in [a for a, n in loops.items() if n == 1]:
+            # A ring so narrow that its two loops join (the spout's lip) goes to the tube
+            # it ends (another union).
+            around = {(q if p == a else p): n for (p, q), n in trial_layout.adjacency.items()
+                      if a in (p, q) and (q if p == a else p) in loops}
+            if not around:
+                return None
+            b = max(around, key=lambda k: around[k])
+            trial[trial == a] = b
+            into = {k: (b if v == a else v) for k, v in into.items()}
+            into[a] = b
+        trial_layout = relayout(trial)
+    else:
+        return None
+    for b, a in into.items():
+        report.merged[int(b)] = int(a)
+    return trial, trial_layout
+
+
+def _merge_narrow_rings(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, relayout: Relayout,
+) -> tuple[NDArray[np.int64], Layout]:
+    """Labels and layout with every segment of two boundary loops closer than
+    ``NARROW_RING`` radii (median) merged into the neighbour it shares the most border with:
+    a ring too narrow for pieces whose corners the layout can tell apart (the teapot spout's
+    lip, 2-3 radii wide at 112k points) joins the tube it ends."""
+    for label in sorted(np.unique(labels).tolist()):
+        loops = boundary_loops(points, labels, tree, label, layout.radius, layout.crossed(label))
+        around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items() if label in (a, b)}
+        if len(loops) != 2 or not around:
+            continue
+        width = float(np.median(cKDTree(points[loops[0][0]]).query(points[loops[1][0]])[0]))
+        if width < NARROW_RING * layout.radius:
+            into = max(around, key=lambda k: around[k])
+            labels = np.where(labels == label, into, labels)
+            report.merged[int(label)] = int(into)
+            report.merged.update({k: int(into) for k, v in report.merged.items() if v == label})
+            layout = relayout(labels)
+    return labels, layout
+
+
+def _merge_slivers(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    report: SplitReport, relayout: Relayout,
+) -> tuple[NDArray[np.int64], Layout]:
+    """Labels and layout with every segment too narrow for the layout to tell its corners
+    apart merged into the neighbour it shares the longest border with: a segment of 1 or 2
+    corners that has neighbours (the teapot's rim at 30k points, whose inner and outer corners
+    merge). Up to ``MAX_ROUNDS`` times, the layout built again after each."""
+    for _ in range(MAX_ROUNDS):
+        _, seg_corners = filter_corners(layout, tree, labels)
+        thin = [label for label, ids in sorted(seg_corners.items()) if 0 < len(ids) < 3]
+        best = None
+        for label in thin:
+            around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items()
+                      if label in (a, b)}
+            if around:
+                best = (label, max(around, key=lambda k: around[k]))
+                break
+        if best is None:
+            return labels, layout
+        label, into = best
+        labels = np.where(labels == label, into, labels)
+        report.merged[int(label)] = int(report.merged.get(into, into))
+        layout = relayout(labels)
     return labels, layout
 
 
@@ -674,26 +809,43 @@ def split_segments(
         with more than ``MAX_CORNERS`` corners (the message names the label).
     """
     report = SplitReport()
+    relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency))
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
     out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
     if out is not labels:
-        layout = build_layout(points, out, check=False)
+        layout = relayout(out)
     layout = _add_sharp_turns(points, out, layout, tree)
-    out, layout = _merge_tubes(points, out, layout, tree, report)
+    chained = _merge_tube_chain(points, out, layout, tree, report, relayout)
+    if chained is not None:
+        out, layout = _merge_narrow_rings(points, *chained, tree, report, relayout)
+        out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
+        layout = _add_sharp_turns(points, out, relayout(out), tree)
+    out, layout = _merge_tubes(points, out, layout, tree, report, relayout)
+    out, layout = _merge_slivers(points, out, layout, tree, report, relayout)
     merged = out
     out = _split_cornerless(points, out, layout, tree, report, max(int(out.max()), int(labels.max())) + 1)
     if out is not merged:
-        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
+        layout = _add_sharp_turns(points, out, relayout(out), tree)
     source = {p: first for first, pieces in report.pieces.items() for p in pieces}
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
         todo = [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4]
-        if not todo:
-            break
         out = out.copy()
         next_label = int(out.max()) + 1
+        if not todo:
+            halved = _halve_digon(points, out, layout, tree, corners, seg_corners)
+            if halved is None:
+                break
+            label, beyond = halved
+            first = source.get(label, label)
+            out[out == label] = np.where(beyond, next_label, label)
+            report.pieces.setdefault(first, [first]).append(next_label)
+            report.corners.setdefault(first, len(seg_corners[label]))
+            source[label] = source[next_label] = first
+            layout = _add_sharp_turns(points, out, relayout(out), tree)
+            continue
         for label, ids in todo:
             first = source.get(label, label)
             if len(ids) > MAX_CORNERS:
@@ -723,11 +875,46 @@ def split_segments(
             report.corners.setdefault(first, len(ids))
             for name in names:
                 source[name] = first
-        layout = _add_sharp_turns(points, out, build_layout(points, out, check=False), tree)
+        layout = _add_sharp_turns(points, out, relayout(out), tree)
     else:
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
     return out, layout, report
+
+
+def _halve_digon(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    corners: NDArray[np.float64], seg_corners: dict[int, list[int]],
+) -> tuple[int, NDArray[np.bool_]] | None:
+    """The first quad that meets one neighbour along two opposite sides (the halves of a
+    tube: the teapot's handle and spout), and which of its points lie beyond its middle
+    between those sides (``a`` or ``b`` of :func:`_strip_cells` over 0.5): its edges with the
+    segments at its ends run between the same two corners as the other half's, which no edge
+    network can tell apart. Cut there, the ends get T-nodes that the next rounds carry along
+    the strip. None when there is no such quad."""
+    reach = CORNER_REACH * layout.radius
+    for (a, b) in sorted(layout.borders):
+        if len(set(seg_corners[a]) & set(seg_corners[b])) <= 2:
+            continue
+        for label, other in ((a, b), (b, a)):
+            ids = seg_corners[label]
+            if len(ids) != 4:
+                continue
+            order = _ordered_corners(layout, points, label, ids, corners)
+            loop = layout.loops[label]
+            _, at = cKDTree(points[loop]).query(corners[order])
+            sides = _side_labels(points, labels, tree, loop, at, label, reach)
+            seams = [k for k in range(4) if sides[k] == other]
+            if seams not in ([0, 2], [1, 3]):
+                continue
+            members = labels == label
+            d = _side_distances(points[members], points[loop], at, np.arange(4))
+            k = seams[0]
+            which = np.zeros(len(points), dtype=bool)
+            which[members] = d[k] / np.maximum(d[k] + d[k + 2], 1e-300) > 0.5
+            if min(int(which.sum()), int(members.sum() - which.sum())) >= MIN_PIECE_POINTS:
+                return label, which[members]
+    return None
 
 
 def _check_pieces(
