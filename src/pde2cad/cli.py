@@ -208,7 +208,10 @@ def _run_vectorize_batch(args: argparse.Namespace) -> int:
     # the cores (numpy is not imported yet at this point, so the limit takes effect).
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    from pde2cad.image import vectorize as _fitter  # noqa: F401  (imported before forking)
+    # Imported before forking, so that every worker inherits them instead of importing them.
+    from pde2cad.image import crossings, symmetry  # noqa: F401
+    from pde2cad.image import vectorize as _fitter  # noqa: F401
+    from pde2cad.io import svg  # noqa: F401
 
     started = time.perf_counter()
     formats = [f.strip().lower().lstrip(".") for f in args.format.split(",") if f.strip()]
@@ -266,7 +269,6 @@ def _batch_lines(results) -> tuple[int, int, int]:
 def _batch_one(job: tuple[str, list[Path], dict[str, Any], dict[str, Any]]) -> dict[str, Any]:
     """Vectorize and write one image of a batch; errors come back as a result, not raised."""
     from pde2cad.image.vectorize import vectorize
-    from pde2cad.io.dxf import write_dxf
 
     image, outputs, options, dxf = job
     try:
@@ -275,6 +277,8 @@ def _batch_one(job: tuple[str, list[Path], dict[str, Any], dict[str, Any]]) -> d
             if out.suffix == ".svg":
                 drawing.write_svg(out)
             else:
+                from pde2cad.io.dxf import write_dxf  # only when asked: it imports ezdxf
+
                 for note in write_dxf(drawing, out, **dxf):
                     print(f"pde2cad vectorize: warning: {out}: {note}", file=sys.stderr)
     except InputError as exc:
