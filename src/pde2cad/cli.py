@@ -84,8 +84,15 @@ def _add_vectorize(sub: argparse._SubParsersAction) -> None:
 
 def _dispatch_vectorize(args: argparse.Namespace) -> int:
     """One image: :func:`_run_vectorize`; several, or ``--out-dir``: :func:`_run_vectorize_batch`."""
+    import os
+
     if args.min_area < 0:
         raise InputError(f"--min-area must be >= 0 pixels, got {args.min_area}")
+    # The fits are many tiny matrices: a BLAS thread pool only costs its start (~80 ms of
+    # CPU on 2 cores) and, in batch mode, oversubscribes the workers. numpy is not imported
+    # yet at this point, so the limit takes effect.
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     if args.out_dir is not None or len(args.images) > 1:
         if args.output:
             raise InputError("-o/--output names one file; with several images use --out-dir DIR")
@@ -204,10 +211,6 @@ def _run_vectorize_batch(args: argparse.Namespace) -> int:
     import os
     import time
 
-    # The workers are the parallelism: a BLAS thread pool in each would only oversubscribe
-    # the cores (numpy is not imported yet at this point, so the limit takes effect).
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
     # Imported before forking, so that every worker inherits them instead of importing them.
     from pde2cad.image import crossings, symmetry  # noqa: F401
     from pde2cad.image import vectorize as _fitter  # noqa: F401
