@@ -316,6 +316,30 @@ def _package_images() -> dict[str, np.ndarray]:
     return out
 
 
+def _skimage_images() -> dict[str, np.ndarray]:
+    """The PNG/JPEG images bundled in an installed scikit-image wheel (skimage/data; found
+    without importing skimage), greyscale, downscaled to about 128 px and thresholded by Otsu."""
+    import importlib.util
+
+    from PIL import Image
+
+    from pde2cad.image.raster import to_mask
+
+    spec = importlib.util.find_spec("skimage")
+    if spec is None or not spec.submodule_search_locations:
+        return {}
+    folder = Path(list(spec.submodule_search_locations)[0]) / "data"
+    out: dict[str, np.ndarray] = {}
+    for p in sorted([*folder.glob("*.png"), *folder.glob("*.jpg")]):
+        im = Image.open(p).convert("L")
+        scale = 128 / max(im.size)
+        grey = np.asarray(im.resize((max(1, round(im.width * scale)), max(1, round(im.height * scale))), Image.LANCZOS))
+        mask = to_mask(grey)
+        if 0.02 < mask.mean() < 0.98:
+            out[p.stem] = mask
+    return out
+
+
 def _salt_pepper(mask: np.ndarray, rate: float, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return mask ^ (rng.random(mask.shape) < rate)
@@ -332,7 +356,7 @@ def make_unseen_sets(folder: Path) -> dict[str, list[Path]]:
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
-    sets: dict[str, list[Path]] = {"glyphs": [], "glyphs_4x": [], "packages": [], "noisy": []}
+    sets: dict[str, list[Path]] = {"glyphs": [], "glyphs_4x": [], "packages": [], "skimage": [], "noisy": []}
 
     def save(kind: str, name: str, mask: np.ndarray) -> None:
         p = folder / f"{kind}__{name}.png"
@@ -355,6 +379,8 @@ def make_unseen_sets(folder: Path) -> dict[str, list[Path]]:
     for i, (name, m) in enumerate(_package_images().items()):
         save("packages", name, m)
         save("noisy", name, _salt_pepper(m, 0.005, 100 + i))
+    for name, m in _skimage_images().items():
+        save("skimage", name, m)
     return {k: v for k, v in sets.items() if v}
 
 
@@ -387,6 +413,10 @@ def print_set_summary(s: dict[str, Any]) -> None:
         f" potrace {s['potrace_mean_time_s']:.3f} s",
         flush=True,
     )
+    if "batch" in s:
+        b = s["batch"]
+        print(f"    batch ({b['jobs']} workers, start-up included): ours {b['ours_s_per_image']:.3f} s per image,"
+              f" potrace loop {b['potrace_s_per_image']:.3f} s per image (x{b['time_ratio']:.1f})", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -409,6 +439,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="write the unseen image sets (fonts, package images, noisy copies) into"
                     " DIR and report each set")
     ap.add_argument("--no-nosym", action="store_true", help="skip the symmetry=False run (faster)")
+    ap.add_argument("--batch-jobs", type=int, default=2, metavar="N",
+                    help="with --unseen: also time one batch call per set with N workers (0: skip)")
     ap.add_argument("--json", type=Path, help="write all numbers to this JSON file")
     args = ap.parse_args(argv)
 
@@ -461,6 +493,31 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def time_batch(paths: list[Path], jobs: int = 2) -> dict[str, float]:
+    """Wall time of one ``pde2cad vectorize IMAGES --out-dir --jobs`` call (start-up
+    included) beside potrace run on each image in a loop, both per image."""
+    import subprocess
+    import tempfile
+
+    from pde2cad.image.evaluate import write_pbm
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "pde2cad.cli", "vectorize", *map(str, paths), "--out-dir", tmp,
+                        "--jobs", str(jobs)], check=True, capture_output=True)
+        ours = time.perf_counter() - t0
+        pbms = [Path(tmp) / f"{i}.pbm" for i in range(len(paths))]
+        for p, pbm in zip(paths, pbms):
+            write_pbm(load_mask(p), pbm)
+        t0 = time.perf_counter()
+        for pbm in pbms:
+            subprocess.run(["potrace", "-s", str(pbm), "-o", str(pbm.with_suffix(".svg"))], check=True)
+        theirs = time.perf_counter() - t0
+    n = max(len(paths), 1)
+    return {"images": len(paths), "jobs": jobs, "ours_s_per_image": ours / n, "potrace_s_per_image": theirs / n,
+            "time_ratio": ours / max(theirs, 1e-9)}
+
+
 def run_unseen(args: argparse.Namespace) -> int:
     """Benchmark every unseen set; print the rows, then one summary line per set."""
     vectorize = get_vectorize()
@@ -475,6 +532,8 @@ def run_unseen(args: argparse.Namespace) -> int:
                                     with_nosym=not args.no_nosym))
             print(table_row(rows[-1], True), flush=True)
         summaries.append(set_summary(name, rows))
+        if args.batch_jobs > 0:
+            summaries[-1]["batch"] = time_batch(paths, args.batch_jobs)
         all_rows[name] = rows
     print()
     for s in summaries:

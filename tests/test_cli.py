@@ -222,15 +222,17 @@ def test_closed_stdout_pipe_exits_0(ring_png, tmp_path):
 
 @pytest.fixture
 def slow_image(tmp_path):
-    """A 7-point star that takes the vectorizer a few seconds."""
+    """Two 7-point stars that take the vectorizer a few seconds (one alone got too fast for
+    the signal tests to catch the run)."""
     size = 300
-    a = -0.3 + np.arange(14) * np.pi / 7
     r = np.where(np.arange(14) % 2 == 0, 0.45, 0.18) * size
     from PIL import ImageDraw
 
-    img = Image.new("L", (size, size), 255)
-    ImageDraw.Draw(img).polygon([(size / 2 + x, size / 2 + y) for x, y in
-                                 zip(r * np.cos(a), r * np.sin(a))], fill=0)
+    img = Image.new("L", (2 * size, size), 255)
+    for k in range(2):
+        a = -0.3 + 0.37 * k + np.arange(14) * np.pi / 7
+        ImageDraw.Draw(img).polygon([(size / 2 + k * size + x, size / 2 + y) for x, y in
+                                     zip(r * np.cos(a), r * np.sin(a))], fill=0)
     path = tmp_path / "star.png"
     img.save(path)
     return path
@@ -275,7 +277,7 @@ def test_kill_9_leftovers_are_removed_by_the_next_run(slow_image, tmp_path):
                 "--report", tmp_path / "s.json")
     assert again.returncode == 0, again.stderr
     assert litter(tmp_path) == []
-    assert json.loads((tmp_path / "s.json").read_text())["loops"] == 1
+    assert json.loads((tmp_path / "s.json").read_text())["loops"] == 2
 
 
 def test_dxf_version_and_offset_flags(ring_png, tmp_path):

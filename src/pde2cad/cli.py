@@ -84,8 +84,15 @@ def _add_vectorize(sub: argparse._SubParsersAction) -> None:
 
 def _dispatch_vectorize(args: argparse.Namespace) -> int:
     """One image: :func:`_run_vectorize`; several, or ``--out-dir``: :func:`_run_vectorize_batch`."""
+    import os
+
     if args.min_area < 0:
         raise InputError(f"--min-area must be >= 0 pixels, got {args.min_area}")
+    # The fits are many tiny matrices: a BLAS thread pool only costs its start (~80 ms of
+    # CPU on 2 cores) and, in batch mode, oversubscribes the workers. numpy is not imported
+    # yet at this point, so the limit takes effect.
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     if args.out_dir is not None or len(args.images) > 1:
         if args.output:
             raise InputError("-o/--output names one file; with several images use --out-dir DIR")
@@ -204,11 +211,10 @@ def _run_vectorize_batch(args: argparse.Namespace) -> int:
     import os
     import time
 
-    # The workers are the parallelism: a BLAS thread pool in each would only oversubscribe
-    # the cores (numpy is not imported yet at this point, so the limit takes effect).
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    from pde2cad.image import vectorize as _fitter  # noqa: F401  (imported before forking)
+    # Imported before forking, so that every worker inherits them instead of importing them.
+    from pde2cad.image import crossings, symmetry  # noqa: F401
+    from pde2cad.image import vectorize as _fitter  # noqa: F401
+    from pde2cad.io import svg  # noqa: F401
 
     started = time.perf_counter()
     formats = [f.strip().lower().lstrip(".") for f in args.format.split(",") if f.strip()]
@@ -266,7 +272,6 @@ def _batch_lines(results) -> tuple[int, int, int]:
 def _batch_one(job: tuple[str, list[Path], dict[str, Any], dict[str, Any]]) -> dict[str, Any]:
     """Vectorize and write one image of a batch; errors come back as a result, not raised."""
     from pde2cad.image.vectorize import vectorize
-    from pde2cad.io.dxf import write_dxf
 
     image, outputs, options, dxf = job
     try:
@@ -275,6 +280,8 @@ def _batch_one(job: tuple[str, list[Path], dict[str, Any], dict[str, Any]]) -> d
             if out.suffix == ".svg":
                 drawing.write_svg(out)
             else:
+                from pde2cad.io.dxf import write_dxf  # only when asked: it imports ezdxf
+
                 for note in write_dxf(drawing, out, **dxf):
                     print(f"pde2cad vectorize: warning: {out}: {note}", file=sys.stderr)
     except InputError as exc:

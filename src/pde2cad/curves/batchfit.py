@@ -94,6 +94,7 @@ def fit_batch(
     pts, valid, p0, p3 = batch.points, batch.valid, batch.p0, batch.p3
     w = valid.astype(float) if weights is None else np.where(valid, weights, 0.0)
     sw = np.sqrt(w)
+    sw3 = sw[..., None]
     base1, base2, lin1, lin2 = _basis(batch)
     l11 = lin1.transpose(0, 2, 1) @ lin1
     l12 = lin1.transpose(0, 2, 1) @ lin2
@@ -106,11 +107,12 @@ def fit_batch(
 
     def state(t_, x_):
         s_ = 1.0 - t_
-        a_, b_ = 3.0 * t_ * s_ * s_, 3.0 * t_ * t_ * s_
+        ts = 3.0 * t_ * s_
+        a_, b_ = ts * s_, ts * t_
         p1_, p2_ = inner(x_)
-        curve = ((s_**3)[..., None] * p0[:, None] + a_[..., None] * p1_[:, None]
-                 + b_[..., None] * p2_[:, None] + (t_**3)[..., None] * p3[:, None])
-        return a_ * sw, b_ * sw, s_, p1_, p2_, (curve - pts) * sw[..., None]
+        curve = ((s_ * s_ * s_)[..., None] * p0[:, None] + a_[..., None] * p1_[:, None]
+                 + b_[..., None] * p2_[:, None] + (t_ * t_ * t_)[..., None] * p3[:, None])
+        return a_ * sw, b_ * sw, s_, p1_, p2_, (curve - pts) * sw3
 
     def hessian(aw, bw):
         return (_dot(aw, aw)[:, None, None] * l11 + _dot(aw, bw)[:, None, None] * l12
@@ -136,7 +138,7 @@ def fit_batch(
         if not active.any():
             break
         jt = (3.0 * (s * s)[..., None] * (p1 - p0)[:, None] + 6.0 * (t * s)[..., None] * (p2 - p1)[:, None]
-              + 3.0 * (t * t)[..., None] * (p3 - p2)[:, None]) * sw[..., None]
+              + 3.0 * (t * t)[..., None] * (p3 - p2)[:, None]) * sw3
         ct = _dot(jt, jt)
         g = (aw[..., None] * jt) @ lin1 + (bw[..., None] * jt) @ lin2
         jtr = _dot(jt, resid)
@@ -154,7 +156,11 @@ def fit_batch(
             new = state(t_new, x_new)
             cost_new = _dot(new[-1], new[-1]).sum(axis=1)
             take = pending & (cost_new < cost)
-            if take.any():
+            if take.all():  # the usual case: every problem improves, no row selection
+                x, t, cost = x_new, t_new, cost_new
+                aw, bw, s, p1, p2, resid = new
+                lam = np.maximum(lam / 3.0, 1e-7)
+            elif take.any():
                 x[take], t[take], cost[take] = x_new[take], t_new[take], cost_new[take]
                 aw[take], bw[take], s[take] = new[0][take], new[1][take], new[2][take]
                 p1[take], p2[take], resid[take] = new[3][take], new[4][take], new[5][take]
@@ -224,20 +230,31 @@ def minimax_batch(batch: Batch, ctrl, t, errors, iterations: int = 3):
     """Batched :func:`pde2cad.curves.fit.minimax_refine`: reweight towards the largest
     errors (Lawson's iteration) and keep each problem's fit while its maximum drops."""
     w = batch.valid.astype(float)
+    ctrl, t, errors = ctrl.copy(), t.copy(), errors.copy()
     best_max = errors.max(axis=1)
-    live = np.ones(len(t), bool)
+    live = np.arange(len(t))
     for _ in range(iterations):
-        w = w * (errors / np.maximum(errors.max(axis=1, keepdims=True), 1e-300) + 0.05)
-        w = np.where(batch.valid, w, 0.0)
-        w = w / np.maximum(w.sum(axis=1, keepdims=True) / batch.valid.sum(axis=1, keepdims=True), 1e-300)
-        c2, t2, e2 = fit_batch(batch, t.copy(), rounds=3, weights=w)
-        better = live & (e2.max(axis=1) < best_max)
-        ctrl, t, errors = np.where(better[:, None, None], c2, ctrl), np.where(better[:, None], t2, t), np.where(better[:, None], e2, errors)
-        best_max = np.where(better, e2.max(axis=1), best_max)
-        live &= better
-        if not live.any():
+        # Only the problems whose maximum still dropped are refitted (rows of the others
+        # would be computed and thrown away).
+        sub = _rows(batch, live) if len(live) < len(t) else batch
+        w = w * (errors[live] / np.maximum(errors[live].max(axis=1, keepdims=True), 1e-300) + 0.05)
+        w = np.where(sub.valid, w, 0.0)
+        w = w / np.maximum(w.sum(axis=1, keepdims=True) / sub.valid.sum(axis=1, keepdims=True), 1e-300)
+        c2, t2, e2 = fit_batch(sub, t[live].copy(), rounds=3, weights=w)
+        better = e2.max(axis=1) < best_max[live]
+        idx = live[better]
+        ctrl[idx], t[idx], errors[idx] = c2[better], t2[better], e2[better]
+        best_max[idx] = e2[better].max(axis=1)
+        live, w = idx, w[better]
+        if not live.size:
             break
     return ctrl, t, errors
+
+
+def _rows(batch: Batch, rows: NDArray[np.int64]) -> Batch:
+    """The problems ``rows`` of a batch."""
+    return Batch(batch.points[rows], batch.valid[rows], batch.p0[rows], batch.p3[rows],
+                 None if batch.tan0 is None else batch.tan0[rows], None if batch.tan3 is None else batch.tan3[rows])
 
 
 def midpoint_errors(ctrl: NDArray[np.float64], batch: Batch, t: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -20,8 +20,8 @@ from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
-    SAFETY, ChainFit, DeadlineExceeded, corner_positions, denoise, fit_chain, fit_closed, fit_closed_free,
-    line_chain,
+    SAFETY, ChainFit, DeadlineExceeded, clear_fit_cache, corner_positions, denoise, fit_chain, fit_closed,
+    fit_closed_free, line_chain,
 )
 from pde2cad.errors import InputError
 from pde2cad.image.contours import ContourLoop, trace_loops
@@ -143,6 +143,7 @@ def vectorize(
     if budget is not None and sum(len(c.points) for c in contours) * _SECONDS_PER_POINT > budget:
         raise _too_slow(name, max_seconds)
     loops = []
+    clear_fit_cache()
     try:
         for c in contours:
             if deadline is not None and time.perf_counter() > deadline:
@@ -150,6 +151,8 @@ def vectorize(
             loops.append(_fit_loop(c, tolerance, symmetry, g1, parameterization, corner_angle, deadline))
     except DeadlineExceeded:
         raise _too_slow(name, max_seconds) from None
+    finally:
+        clear_fit_cache()
     return Drawing(
         width=int(mask.shape[1]),
         height=int(mask.shape[0]),
