@@ -13,6 +13,7 @@ instead.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,9 +42,9 @@ class KnownCorners:
     segments: dict[int, tuple[int, ...]]
     on_open: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
-    def moved(self, move: object) -> KnownCorners:
+    def moved(self, move: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> KnownCorners:
         """The same corners with ``points`` mapped by ``move`` (e.g. a frame change)."""
-        return dataclasses.replace(self, points=np.asarray(move(self.points)))  # type: ignore[operator]
+        return dataclasses.replace(self, points=np.asarray(move(self.points)))
 
 
 def with_known_corners(
