@@ -41,8 +41,8 @@ from pde2cad.frame import Frame
 from pde2cad.io.clouds import as_labels
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
-from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.layout.known import KnownCorners, with_known_corners
+from pde2cad.layout.ribbons import shared_ribbons
 from pde2cad.layout.split import SplitReport, split_segments
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.patch import Continuity, Patch, fit_patch
