@@ -110,11 +110,12 @@ def _ours(path: Path, reference: np.ndarray, diagonal: float, continuity: str) -
     from pde2cad.report import build_report
 
     t0 = time.perf_counter()
-    surface = read_surface(path, sample_points=SAMPLES)
+    # a mesh is sampled as the CLI samples it (its default count); points are read as given
+    surface = read_surface(path)
     with quiet_messages():
         rec, layout = reconstruct_auto(surface, continuity=continuity)
-    step = path.with_suffix(".step")
-    write_step(rec.shape, step)
+        step = path.with_suffix(".step")
+        write_step(rec.shape, step)
     elapsed = time.perf_counter() - t0
     s = build_report(rec, step, orthogonal=False)["summary"]
     dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
@@ -147,7 +148,10 @@ def _poisson(points: np.ndarray, reference: np.ndarray, diagonal: float) -> dict
     dist = scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
     back = cKDTree(reference).query(np.asarray(mesh.vertices), workers=-1)[0]
     return {
-        "valid": True, "closed": bool(mesh.is_watertight()), "free_edges": None, "gap": None,
+        # closed = every edge has two faces; ``is_watertight`` would also run open3d's
+        # all-pairs self-intersection test, which takes many minutes on a depth-8 mesh
+        "valid": True, "closed": bool(mesh.is_edge_manifold(allow_boundary_edges=False)),
+        "free_edges": None, "gap": None,
         "seam": None, "in_f": float(dist.mean() / diagonal),
         "f_in95": float(np.percentile(back, 95) / diagonal),
         "far": float(np.mean(dist > 0.01 * diagonal)), "time": elapsed, "patches": None,
@@ -189,6 +193,29 @@ def _row(name: str, variant: str, method: str, r: dict[str, Any]) -> str:
             f"{r['time']:>6.1f}")
 
 
+def _collect(proc: Any, queue: Any, limit: float) -> dict[str, Any]:
+    """The case's result, read before joining (a child blocks on a full pipe until read).
+
+    1. Poll the queue each second for up to ``limit`` s while the child lives.
+    2. Nothing came: a timeout if the child still runs (it is terminated), else a crash.
+    """
+    import queue as queues
+
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline:
+        try:
+            out: dict[str, Any] = queue.get(timeout=1.0)
+            proc.join(10)
+            return out
+        except queues.Empty:
+            if not proc.is_alive() and queue.empty():
+                break
+    why = "timeout" if proc.is_alive() else "crashed"
+    proc.terminate()
+    proc.join(10)
+    return {"ours": {"error": why}, "poisson": {"error": why}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
@@ -211,13 +238,7 @@ def main() -> None:
             queue = ctx.Queue()
             proc = ctx.Process(target=_run, args=(name, variant, args.continuity, queue))
             proc.start()
-            proc.join(args.timeout * 4)  # ours, its read-back check and Poisson
-            if proc.is_alive():
-                proc.terminate()
-                out = {"ours": {"error": "timeout"}, "poisson": {"error": "timeout"}}
-            else:
-                out = queue.get() if not queue.empty() else {"ours": {"error": "crashed"},
-                                                              "poisson": {"error": "crashed"}}
+            out = _collect(proc, queue, args.timeout * 4)  # ours, its read-back and Poisson
             for method in ("ours", "poisson"):
                 print(_row(name, variant, method, out[method]), flush=True)
             results.append({"case": name, "variant": variant, **out})
