@@ -34,6 +34,7 @@ from pde2cad.errors import InputError
 from pde2cad.layout.auto import (
     CREASE_ANGLE,
     CURVATURE_PERCENTILE,
+    LAYOUT_TRIES,
     TURN_PER_PATCH,
     AutoLayout,
     best_layout,
@@ -215,7 +216,9 @@ def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDAr
        point count: 9 s for 60k points, 1 s for 20k on this machine).
     2. Poisson (depth 7: the mesh only guides the layout; the patches fit the points),
        duplicate vertices merged (trimesh). Not trimmed: Instant Meshes returns nothing on
-       the trimmed (holed) meshes tried.
+       the trimmed (holed) meshes tried. One thread: threaded Poisson orders its vertices
+       differently each run, which changes the layout; depth 7 on one thread takes well
+       under a second.
     """
     import open3d as o3d
     import trimesh
@@ -224,7 +227,8 @@ def surface_mesh(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDAr
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
     pcd.orient_normals_consistent_tangent_plane(12)
-    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=7)
+    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=7,
+                                                                       n_threads=1)
     merged = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles), process=True)
     return np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)
 
@@ -245,17 +249,21 @@ def _quiet_call(func, *args, **kwargs):  # type: ignore[no-untyped-def]
 
 def quad_remesh(
     vertices: NDArray[np.float64], triangles: NDArray[np.int64], patches: int,
-    crease_angle: float = CREASE_ANGLE,
+    crease_angle: float = CREASE_ANGLE, variant: int = 0,
 ) -> tuple[NDArray[np.float64], list[tuple[int, ...]]]:
-    """A coarse pure-quad mesh of about ``patches`` faces (Instant Meshes).
+    """A coarse pure-quad mesh of about ``patches`` faces (Instant Meshes); ``variant`` > 0
+    asks for that many more faces, which gives another layout (see below).
 
     Pure-quad mode subdivides every face of the quad-dominant result into quads, so the
-    remesher is asked for a quarter of the faces. Its deterministic mode returns nothing on
-    some inputs (a torus), so it is not used. It also returns nothing, at any face count
-    tried (6-14), on some Poisson meshes (a noisy, unevenly dense sphere scan's, 82k
-    triangles), and gives a layout on the same mesh decimated to half its triangles; so an
-    empty result is retried on the mesh decimated by half (open3d quadric decimation) and
-    with 1.5x faces.
+    remesher is asked for a quarter of the faces. Its deterministic mode comes first (the
+    same input gives the same layout, so ``--labels-out`` then ``--labels`` reruns it, and
+    reports repeat); where it returns nothing the threaded mode (whose result varies from
+    run to run) is tried. A layout to try next comes from one more face asked for (a torus:
+    80, 50, 80, 114 faces for 13-16 asked), not from the threads' chance. The remesher
+    also returns nothing, at any face count tried (6-14), on some Poisson meshes (a noisy,
+    unevenly dense sphere scan's, 82k triangles), and gives a layout on the same mesh
+    decimated to half its triangles; so an empty result is retried on the mesh decimated by
+    half (open3d quadric decimation) and with 1.5x faces.
     """
     try:
         import pyinstantmeshes as pim
@@ -266,12 +274,14 @@ def quad_remesh(
         ) from exc
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(triangles, dtype=np.int32)
-    target = max(2, int(round(patches / 4)))
+    target = max(2, int(round(patches / 4))) + variant
     for _ in range(REMESH_TRIES):
-        out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
-                                   crease_angle=float(crease_angle), pure_quad=True)
-        if len(out_f):
-            return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
+        for deterministic in (True, False):
+            out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
+                                       crease_angle=float(crease_angle), pure_quad=True,
+                                       deterministic=deterministic)
+            if len(out_f):
+                return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
         target = int(target * 1.5) + 1
         v, f = _decimated(v, f)
     raise InputError(
@@ -350,6 +360,7 @@ def auto_layout(
     surface: Surface, *, patches: int | None = None, patch_size: float | None = None,
     crease_angle: float = CREASE_ANGLE,
     guide: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None, finer: float = 1.0,
+    attempt: int = 0,
 ) -> AutoLayout:
     """One label per point of ``surface``: a coarse quad mesh's faces as patches.
 
@@ -367,6 +378,8 @@ def auto_layout(
         cloud, and the same for every layout tried).
     finer : float
         Factor on the patch count (a layout that folded is tried again finer).
+    attempt : int
+        How many layouts were tried before (each gets other remesher variants).
     """
     vertices, tris = guide_mesh(surface) if guide is None else guide
     count = int(round(finer * patch_count(surface.points, vertices, tris, patches, patch_size)))
@@ -382,7 +395,9 @@ def auto_layout(
     align = crease_angle if n_creases else NO_CREASES
     fine_v, fine_t = _refined(vertices, tris, count)
     q_vertices, faces, _ = best_layout(
-        surface.points, lambda: quad_remesh(fine_v, fine_t, count, align), normals=normals)
+        surface.points,
+        lambda i: quad_remesh(fine_v, fine_t, count, align, variant=attempt * LAYOUT_TRIES + i),
+        normals=normals)
     grid, grid_faces, owner = surface_faces(surface.points, q_vertices, faces, normals)
     projected = claim_sides(
         surface.points, owner[label_points(surface.points, grid, grid_faces, normals=normals)],
@@ -412,8 +427,8 @@ MIN_REGION_SHARE = 0.25
 #: Remesher runs per layout before giving up (each asks for 1.5x the faces of the last).
 REMESH_TRIES = 5
 
-#: Layouts tried by :func:`reconstruct_auto` (the remesher is randomized; a rare layout has a
-#: face the pipeline reads with a spurious corner, or a face that folds at a corner).
+#: Layouts tried by :func:`reconstruct_auto`, each from other remesher variants (a rare
+#: layout has a face the pipeline reads with a spurious corner, or one that folds).
 ATTEMPTS = 3
 #: A seam whose faces' normals differ by more than this (degrees) on a surface without
 #: creases is a fold or a patch turning too far (measured: 174-179 deg on some sphere and
@@ -472,7 +487,7 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     angle, finer = crease_angle, 1.0
     for attempt in range(ATTEMPTS):
         layout = auto_layout(surface, patches=patches, patch_size=patch_size,
-                             crease_angle=angle, guide=guide, finer=finer)
+                             crease_angle=angle, guide=guide, finer=finer, attempt=attempt)
         say(f"layout {attempt + 1}: {layout.summary['patches']} patches; fitting")
         try:
             rec = reconstruct(surface.points, layout.labels, corners=layout.corners,

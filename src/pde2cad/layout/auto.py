@@ -236,16 +236,17 @@ def relax_layout(
 
 def best_layout(
     points: NDArray[np.float64],
-    remesh: Callable[[], tuple[NDArray[np.float64], list[tuple[int, ...]]]],
+    remesh: Callable[[int], tuple[NDArray[np.float64], list[tuple[int, ...]]]],
     tries: int = LAYOUT_TRIES, normals: NDArray[np.float64] | None = None,
     relax: bool = True,
 ) -> tuple[NDArray[np.float64], list[tuple[int, ...]], float]:
-    """The best of a few (randomized) coarse meshes, each relaxed on the surface.
+    """The best of a few coarse meshes (``remesh(i)``, i = 0, 1, ...), each relaxed on the
+    surface.
 
     Remeshing costs a second or two, a reconstruction ten times that; so the layouts are
     ranked by :func:`layout_quality` before any is fitted.
 
-    1. Up to ``tries`` times: ``remesh()``, then :func:`relax_layout` (if ``relax``).
+    1. Up to ``tries`` times: ``remesh(i)``, then :func:`relax_layout` (if ``relax``).
     2. Stop at the first whose quality is at most ``GOOD_LAYOUT`` deg; else keep the best.
 
     Returns
@@ -255,8 +256,8 @@ def best_layout(
     if normals is None and relax:
         normals = point_normals(points)
     best: tuple[NDArray[np.float64], list[tuple[int, ...]], float] | None = None
-    for _ in range(max(1, tries)):
-        vertices, faces = remesh()
+    for i in range(max(1, tries)):
+        vertices, faces = remesh(i)
         if relax:
             vertices = relax_layout(points, vertices, faces, normals=normals)
         score = layout_quality(vertices, faces)
