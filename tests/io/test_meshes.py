@@ -261,3 +261,23 @@ def test_a_body_with_thin_lobes_gets_a_layout_from_its_coarse_corners(tmp_path: 
     # than a patch side is covered by one face that folds at its tip (the remesher sizes
     # its faces evenly); that needs curvature-adaptive sizing, still to come.
     assert dist.mean() <= 2e-3 * diagonal
+
+
+def test_the_guide_mesh_and_the_coarse_quads_repeat_exactly() -> None:
+    """The same noisy cloud twice: the guide Poisson mesh and Instant Meshes' coarse quads
+    come out bit for bit the same (threaded, both changed from run to run, and a layout
+    written by --labels-out could not be refitted with --labels), and the next variant is
+    another layout."""
+    from pde2cad.io.meshes import quad_remesh, surface_mesh
+
+    rng = np.random.default_rng(11)
+    p = rng.normal(size=(20_000, 3)) * [1.0, 0.7, 0.5]
+    p /= np.linalg.norm(p / [1.0, 0.7, 0.5], axis=1, keepdims=True)
+    p += rng.normal(scale=0.002 * 2.0, size=p.shape)
+    meshes = [surface_mesh(p) for _ in range(2)]
+    assert np.array_equal(meshes[0][0], meshes[1][0])
+    assert np.array_equal(meshes[0][1], meshes[1][1])
+    quads = [quad_remesh(*meshes[0], 24) for _ in range(2)]
+    assert np.array_equal(quads[0][0], quads[1][0]) and quads[0][1] == quads[1][1]
+    other = quad_remesh(*meshes[0], 24, variant=1)
+    assert len(other[0]) != len(quads[0][0]) or not np.allclose(other[0], quads[0][0])
