@@ -644,8 +644,13 @@ def _merge_tube_chain(
     at once, when each union then has two boundary loops: a tube in halves along a chain of sections
     (the teapot's handle: two sections of two halves, whose corners are where the 4 meet);
     :func:`~pde2cad.layout.rings.split_rings` then cuts the tubes so their cuts meet. None
-    when there is no such pair or a union is no tube."""
-    _, seg_corners = filter_corners(layout, tree, labels)
+    when there is no such pair or a union is no tube.
+
+    The corners counted are the layout's own, not the sharp turns of
+    :func:`_add_sharp_turns`: a wavy border (jittered cube-map faces of a noisy ellipsoid)
+    turns sharply in both loops mid-way, and its 3 common corners merged four quads into a
+    ring."""
+    _, seg_corners = filter_corners(dataclasses.replace(layout, sharp_corners=None), tree, labels)
     pairs = [(a, b) for a, b in sorted(layout.borders)
              if len(set(seg_corners[a]) & set(seg_corners[b])) > 2]
     if not pairs:
