@@ -979,11 +979,14 @@ def build_layout(
     for a, b in adjacency:
         ia, ib = np.searchsorted(present, [a, b])
         near_seg[ia, ib] = near_seg[ib, ia] = True
-    corners, open_corners, touches = _cluster(
+    corners, open_corners, touched = _cluster(
         pts, tree, cand, CLUSTER_FACTOR * radius, BORDER_SPAN * radius, on_open, seen, near_seg,
         radius,
     )
-    segment_corners = _assign(tree, lab, present, corners, CLUSTER_FACTOR * radius, touches, radius)
+    touches = (touched.astype(np.int64) @ near_seg.astype(np.int64)) > 0
+    segment_corners = _assign(
+        tree, lab, present, corners, CLUSTER_FACTOR * radius, touches, radius, touched
+    )
     # A border too short for the span test is one all the same where the two segments share
     # two distinct corners, its ends (the teapot rim's 0.3-long seams, sparsely sampled).
     for (a, b), (count, border) in short.items():
@@ -991,6 +994,7 @@ def build_layout(
         if len(common) == 2 and np.linalg.norm(corners[common[0]] - corners[common[1]]) >= CLUSTER_FACTOR * radius:
             adjacency[(a, b)] = count
             borders[(a, b)] = border
+    _end_borders(borders, corners, segment_corners, radius)
     if check:
         for label, which in segment_corners.items():
             if len(which) not in (3, 4):
@@ -1014,6 +1018,41 @@ def build_layout(
             (int(present[i]), int(present[j])) for i, j in zip(*np.nonzero(np.triu(cut)))
         ),
     )
+
+
+def _end_borders(
+    borders: dict[tuple[int, int], NDArray[np.float64]], corners: NDArray[np.float64],
+    segment_corners: dict[int, NDArray[np.int64]], radius: float,
+) -> None:
+    """Give each border that ends at only one corner of both its segments its other end
+    (in place): the corner of either segment nearest the border's far end, within
+    ``BORDER_SPAN`` radii of it, is made a corner of the other segment too.
+
+    Where a sliver meets a junction (two junctions of four segments a border's span apart,
+    merged into one corner), the corner goes to the segments seen around one junction only,
+    and the side of a segment across the sliver then ends at no corner: "found 3 edges for
+    its 4 corners" on k-means capsules and split sphere layouts. A border shorter than
+    ``BORDER_SPAN`` radii beyond its one common corner (diagonal pieces touching at a
+    corner) is left alone."""
+    reach = BORDER_SPAN * radius
+    for (a, b), border in borders.items():
+        common = set(segment_corners[a].tolist()) & set(segment_corners[b].tolist())
+        if len(common) != 1 or not len(border):
+            continue
+        here = corners[next(iter(common))]
+        far = border[int(np.argmax(np.linalg.norm(border - here, axis=1)))]
+        if np.linalg.norm(far - here) < reach:
+            continue
+        own = sorted((set(segment_corners[a].tolist()) | set(segment_corners[b].tolist())) - common)
+        if not own:
+            continue
+        gap = np.linalg.norm(corners[own] - far, axis=1)
+        if gap.min() > reach or np.linalg.norm(corners[own[int(np.argmin(gap))]] - here) < reach:
+            continue
+        c = own[int(np.argmin(gap))]
+        for label in (a, b):
+            if c not in segment_corners[label]:
+                segment_corners[label] = np.sort(np.r_[segment_corners[label], c])
 
 
 def _confirm_turns(
@@ -1086,8 +1125,8 @@ def _cluster(
         The cloud point nearest each cluster's centroid.
     marked : (C,) bool
         Whether the cluster holds a candidate with ``mark`` set.
-    touches : (C, S) bool
-        The segments the cluster's candidates touch or that are adjacent to one of those.
+    touched : (C, S) bool
+        The segments the cluster's candidates touch (within the radius of one of them).
     """
     n_seg = 1 if seen is None else seen.shape[1]
     if not cand.size:
@@ -1140,7 +1179,7 @@ def _cluster(
             centroid = centroids(comp)
     _, nearest = tree.query(centroid)
     marked = np.bincount(comp, weights=mark, minlength=len(centroid)) > 0
-    return pts[nearest], marked, (touching(comp).astype(np.int64) @ near_seg.astype(np.int64)) > 0
+    return pts[nearest], marked, touching(comp)
 
 
 def _assign(
@@ -1151,13 +1190,21 @@ def _assign(
     dist: float,
     touches: NDArray[np.bool_] | None = None,
     radius: float | None = None,
+    touched: NDArray[np.bool_] | None = None,
 ) -> dict[int, NDArray[np.int64]]:
     """Corners within ``dist`` of at least one point of each segment (and, with ``touches``,
     (C, S) bool, among the segments the corner's candidates touch or that are adjacent to
     those: a corner of the teapot's rim lies within ``dist`` of the lid across their gap,
     but is none of the lid's). With ``radius``, ``dist`` is measured along the surface
-    (:func:`surface_reach`): the rim's inner corners are no corners of the body 0.1 below."""
+    (:func:`surface_reach`): the rim's inner corners are no corners of the body 0.1 below.
+    With ``touched`` (C, S) bool, also the segments a candidate of the corner touched itself,
+    however far the merged cluster's centroid lies: two junctions of four segments a border
+    apart merge into one corner that lay 2.5 radii from one of them (k-means capsule), whose
+    sides then met at no corner."""
     out: dict[int, list[int]] = {int(label): [] for label in present}
+    if touched is not None:
+        for c, s in zip(*np.nonzero(touched)):
+            out[int(present[s])].append(int(c))
     if len(corners):
         if radius is None:
             near = tree.query_ball_point(corners, dist)
@@ -1167,4 +1214,4 @@ def _assign(
             for label in np.unique(lab[np.asarray(rows, dtype=np.int64)]):
                 if touches is None or touches[c, np.searchsorted(present, label)]:
                     out[int(label)].append(c)
-    return {label: np.asarray(sorted(v), dtype=np.int64) for label, v in out.items()}
+    return {label: np.asarray(sorted(set(v)), dtype=np.int64) for label, v in out.items()}

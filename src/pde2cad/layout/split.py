@@ -644,8 +644,13 @@ def _merge_tube_chain(
     at once, when each union then has two boundary loops: a tube in halves along a chain of sections
     (the teapot's handle: two sections of two halves, whose corners are where the 4 meet);
     :func:`~pde2cad.layout.rings.split_rings` then cuts the tubes so their cuts meet. None
-    when there is no such pair or a union is no tube."""
-    _, seg_corners = filter_corners(layout, tree, labels)
+    when there is no such pair or a union is no tube.
+
+    The corners counted are the layout's own, not the sharp turns of
+    :func:`_add_sharp_turns`: a wavy border (jittered cube-map faces of a noisy ellipsoid)
+    turns sharply in both loops mid-way, and its 3 common corners merged four quads into a
+    ring."""
+    _, seg_corners = filter_corners(dataclasses.replace(layout, sharp_corners=None), tree, labels)
     pairs = [(a, b) for a, b in sorted(layout.borders)
              if len(set(seg_corners[a]) & set(seg_corners[b])) > 2]
     if not pairs:
@@ -831,7 +836,7 @@ def split_segments(
     for _ in range(MAX_ROUNDS):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
-        todo = [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4]
+        todo = _apart(layout, [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4])
         out = out.copy()
         next_label = int(out.max()) + 1
         if not todo:
@@ -880,6 +885,19 @@ def split_segments(
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
     return out, layout, report
+
+
+def _apart(layout: Layout, todo: list[tuple[int, list[int]]]) -> list[tuple[int, list[int]]]:
+    """The segments of ``todo`` to split in one round: each unless it borders one taken
+    before it (the rest wait for the next round, on the new layout). Two neighbours cut in
+    the same round end their cuts on their common border independently, a radius or two
+    apart: a sliver between them whose corners merge (a k-means capsule's 5-cornered
+    segments left a 2-cornered piece)."""
+    taken: list[tuple[int, list[int]]] = []
+    for label, ids in todo:
+        if not any((min(label, t), max(label, t)) in layout.borders for t, _ in taken):
+            taken.append((label, ids))
+    return taken
 
 
 def _halve_digon(
