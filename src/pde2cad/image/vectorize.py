@@ -557,7 +557,7 @@ def _shared_corners(pts: NDArray[np.float64], corners: NDArray[np.int64], sym, r
 
 def _corner_tips(pts: NDArray[np.float64], corners: NDArray[np.int64], sym, tol: float) -> dict[int, NDArray[np.float64]]:
     """Where each corner's curves end: the sharpened corner for an exact pixel symmetry,
-    else the corner vertex averaged with its copies' nearest vertices mapped back.
+    else the corner vertex averaged with its copies' nearest corners mapped back.
 
     A tip sharpened on one copy's staircase extrapolates that copy's raster; mapped onto
     a copy that is a different staircase it can land over a pixel off it (star tips).
@@ -573,7 +573,7 @@ def _corner_tips(pts: NDArray[np.float64], corners: NDArray[np.int64], sym, tol:
     powers = 1 if sym.kind == "mirror" else sym.order - 1
     for j in range(1, powers + 1):
         image = sym.apply(image)
-        back = pts[nearest(pts, image)[1]]
+        back = where[nearest(where, image)[1]]
         for _ in range(j):
             back = sym.inverse().apply(back)
         total += back
@@ -705,9 +705,7 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
             parts.append(seg)
     params, owner = [], []
     for j, part in enumerate(parts):
-        step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
-        arc = np.r_[0.0, np.cumsum(step)]
-        params.append(arc / max(arc[-1], 1e-12))
+        params.append(_corner_param(part, run, local))
         owner.append(np.full(len(part), j))
     s = np.concatenate(params)
     own = np.concatenate(owner)
@@ -725,6 +723,26 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
     cuts = position[offset_run[local]] - first
     merged = merged[keep]
     return merged, np.sort(cuts[(cuts > 0) & (cuts < len(merged) - 1)]), len(parts)
+
+
+def _corner_param(part: NDArray[np.float64], run: NDArray[np.float64], local: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Parameters of a copy's points (mapped onto the run) for pooling: ``i + f`` on the
+    stretch between the copy's points nearest the run's corners ``i`` and ``i + 1``, ``f``
+    its arc-length fraction there.
+
+    Congruent copies off the pixel grid have stretches of different lengths (a stem one
+    pixel wider), so one arc-length fraction over the whole run would pool points from
+    beyond a corner into the next piece, which then cannot be straight.
+    """
+    inner = np.argmin(((part[None, :, :] - run[local][:, None, :]) ** 2).sum(axis=2), axis=1) if len(local) else local
+    anchors = np.r_[0, inner, len(part) - 1].astype(np.int64)
+    if np.any(np.diff(anchors) <= 0):
+        anchors = np.array([0, len(part) - 1])
+    step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(step)]
+    seg = np.clip(np.searchsorted(anchors, np.arange(len(part)), side="right") - 1, 0, len(anchors) - 2)
+    lo, hi = arc[anchors[seg]], arc[anchors[seg + 1]]
+    return seg + (arc - lo) / np.maximum(hi - lo, 1e-12)
 
 
 def _fit_run(
