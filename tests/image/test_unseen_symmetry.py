@@ -14,8 +14,10 @@ import pytest
 from numpy.typing import NDArray
 
 import pde2cad
+from pde2cad.image.contours import trace_loops
 from pde2cad.image.drawing import Drawing
 from pde2cad.image.evaluate import outline_error
+from pde2cad.image.symmetry import boundary_gap, could_be_symmetric, detect_symmetry
 
 Mask = NDArray[np.bool_]
 
@@ -97,3 +99,13 @@ def test_asymmetric_blob_stays_plain() -> None:
     assert with_sym.loops[0].symmetry is None
     assert with_sym.n_curves == without.n_curves
     assert _distance(mask, with_sym) <= 1.05
+
+
+@pytest.mark.parametrize("make", [_trefoil, _cog, _bean, _pinwheel, _blob])
+def test_cheap_screen_never_rules_out_a_symmetry_within_the_gap(make: Callable[[], Mask]) -> None:
+    pts = max(trace_loops(make()), key=lambda lp: len(lp.points)).points
+    limit = 2.46  # the vectorizer's 2 tol SAFETY + 0.5 at tol 1
+    passing = [s for s in detect_symmetry(pts, iou_min=0.85, max_order=24) if boundary_gap(pts, s) <= limit]
+    screen = could_be_symmetric(pts, limit, 24)
+    assert screen or not passing
+    assert screen == (make is not _blob)
