@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from pde2cad.curves.distance import nearest
 from pde2cad.errors import InputError
 
-__all__ = ["Symmetry", "boundary_gap", "detect_symmetry", "fill_loop", "fundamental_split"]
+__all__ = ["Symmetry", "boundary_gap", "could_be_symmetric", "detect_symmetry", "fill_loop", "fundamental_split"]
 
 # Loops below these sizes carry too few pixels for an IoU to mean anything.
 _MIN_VERTICES = 16
@@ -717,6 +717,42 @@ def boundary_gap(points: ArrayLike, sym: Symmetry, reach: int = 4) -> float:
     hit[ok] = marked[cand[..., 1][ok], cand[..., 0][ok]]
     dist = np.where(hit, np.linalg.norm(cand - q[:, None, :], axis=2), np.inf)
     return float(dist.min(axis=1).max())
+
+
+def could_be_symmetric(points: ArrayLike, max_distance: float, max_order: int = 8, bins: int = 360) -> bool:
+    """False when no rotation about the centroid (order 2..max_order) and no mirror through it
+    can map every loop vertex within ``max_distance`` of a loop vertex; O(n + bins^2).
+
+    Steps: 1. ``h``: the farthest vertex from the area centroid in each angular bin;
+    2. a map T fixing the centroid takes that vertex to the angle of bin ``b``'s image,
+    where a vertex at most ``L`` away lies (``L``: ``max_distance`` plus a pixel for the
+    centroid and axis offset), within ``asin(L / r)`` of that angle and at radius at least
+    ``h[b] - L``; 3. so the maximum of ``h`` over that window must reach ``h[b] - L``.
+    Bins nearer than half the farthest radius are not tested (their windows are wide).
+    A necessary condition of :func:`boundary_gap` <= ``max_distance``: True is no promise.
+    """
+    p = _validate_loop(points)
+    _, centroid, _ = _polygon_moments(p)
+    d = p - centroid
+    r = np.hypot(d[:, 0], d[:, 1])
+    reach = float(max_distance) + 1.0
+    big = 0.5 * r.max()
+    if big <= 2.0 * reach:
+        return True  # too small for the angular windows to mean anything
+    b = np.floor((np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi)) % 1.0 * bins).astype(np.int64) % bins
+    h = np.full(bins, -np.inf)
+    np.maximum.at(h, b, r)
+    half = int(np.ceil(np.arcsin(reach / (big - reach)) * bins / (2 * np.pi))) + 2  # +1 bin, +1 rounding
+    wide = np.max([np.roll(h, j) for j in range(-half, half + 1)], axis=0)  # wide[i]: max near bin i
+    src = np.flatnonzero(h >= big)
+    need = h[src] - reach
+    for k in range(2, int(max_order) + 1):
+        for sign in (1, -1):
+            if np.all(wide[(src + sign * int(round(bins / k))) % bins] >= need):
+                return True
+    # Mirror about the axis at angle m pi / bins: bin b goes to bin m - b.
+    dst = (np.arange(bins)[:, None] - src[None, :] - 1) % bins
+    return bool(np.any(np.all(wide[dst] >= need[None, :], axis=1)))
 
 
 def _cyclic_gap(a: NDArray[np.intp] | int, b: NDArray[np.intp] | int, n: int) -> NDArray[np.intp]:

@@ -29,7 +29,8 @@ from pde2cad.image.corners import CORNER_ANGLE, CORNER_SCALE, detect_corners
 from pde2cad.image.drawing import Drawing, OutlineLoop
 from pde2cad.image.raster import read_image, to_mask
 
-# A symmetric outline may be this many curves longer than the plain fit of the loop.
+# A symmetric outline may be this many curves longer than the plain fit of the loop, or
+# longer by as many curves as its fitted part saves (see _written_limit).
 _SYMMETRY_GROWTH = 1
 # Symmetry detection: a coarse IoU screen, then the boundary test within the tolerance;
 # rotation orders up to this (gears have many teeth).
@@ -288,12 +289,9 @@ def _fit_loop(
     fitted = len(curves)
     if symmetry and len(pts) >= _SYMMETRY_MIN_POINTS and len(curves) > 1:
         found = _search_symmetric(pts, corners, tol, g1, method, len(curves), plain_s, deadline)
-        if found is not None:
-            curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
-            curves, is_line = _flag_lines(curves, tol * SAFETY - max_err)
-            if any(is_line):
-                errors = points_to_curves(pts, curves)
-                max_err, mean_err = float(errors.max()), float(errors.mean())
+        taken = None if found is None else _symmetric_outline(pts, found, tol)
+        if taken is not None:
+            curves, methods, n_corners, max_err, mean_err, sym_name, fitted, is_line = taken
     curves = _close_gaps(curves)
     untangled = _untangle(pts, curves, is_line, tol)
     if untangled is not None:
@@ -315,6 +313,21 @@ def _fit_loop(
         fitted_curves=int(fitted),
         is_line=is_line,
     )
+
+
+def _symmetric_outline(pts: NDArray[np.float64], found: tuple, tol: float) -> tuple | None:
+    """The symmetric fit with its straight curves flagged; None when its curves cross so
+    that :func:`_untangle` would patch crack lines in (the outline would no longer be
+    symmetric, and can grow by hundreds of lines: a small snowflake's arms)."""
+    curves, methods, n_corners, max_err, mean_err, sym_name, fitted = found
+    curves, is_line = _flag_lines(curves, tol * SAFETY - max_err)
+    if any(is_line):
+        errors = points_to_curves(pts, curves)
+        max_err, mean_err = float(errors.max()), float(errors.mean())
+    untangled = _untangle(pts, _close_gaps(curves), is_line, tol)
+    if untangled is not None and len(untangled[0]) != len(curves):
+        return None
+    return curves, methods, n_corners, max_err, mean_err, sym_name, fitted, is_line
 
 
 def _close_gaps(curves: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -439,41 +452,138 @@ def _fit_symmetric(
 
     A symmetric loop is stored as its fitted part plus the transform (Section 3.1): it
     "saves curves" when the fitted part has fewer curves than the plain fit of the whole
-    loop, and it is only taken when the written outline (part + mapped copies) grows by at
-    most one curve over the plain one (an exactly symmetric outline is worth that much to a
-    user who edits it) and stays within the tolerance of the real boundary everywhere.
+    loop, and it is only taken when the written outline (part + mapped copies) stays within
+    :func:`_written_limit` of the plain one (an exactly symmetric outline with fewer
+    independent curves is worth that much to a user who edits it) and within the tolerance
+    of the real boundary everywhere, both ways; else the plain fit stays.
+    Steps: 0. the cheap screen :func:`could_be_symmetric`; 1. candidates from
+    :func:`detect_symmetry`; 2. the boundary test
+    (:func:`_symmetry_gap`); 3. the corners every copy shares; 4. the pooled part fit.
     """
-    from pde2cad.image.symmetry import boundary_gap, detect_symmetry, fundamental_split
+    from pde2cad.image.symmetry import could_be_symmetric, detect_symmetry
 
-    best = None
-    # Candidates come best saving first; the first one that passes is kept, and only the
-    # first few are tried (each costs a fit of its fundamental part).
     limit = 2.0 * tol * SAFETY + 0.5  # two staircases within tol of one curve
-    tries = 0
+    if not could_be_symmetric(pts, limit, _SYMMETRY_MAX_ORDER):
+        return None  # ~1 ms: most loops of a thresholded photo stop here
     found = detect_symmetry(pts, corners=corners, iou_min=_SYMMETRY_IOU, max_order=_SYMMETRY_MAX_ORDER)
     if np.isfinite(plain_s):
         local = time.perf_counter() + _SYMMETRY_TIME * plain_s + _SYMMETRY_MIN_S
         deadline = local if deadline is None else min(local, deadline)
-    for sym in found:
-        copies = 2 if sym.kind == "mirror" else sym.order
-        if best is not None or tries == _SYMMETRY_CANDIDATES:
+    # Candidates come best saving first, those with at most one copy per plain curve
+    # ahead (only they can write at most _SYMMETRY_GROWTH more curves). The first that
+    # passes that test is kept, else the one writing the fewest; only the first few of
+    # each group are tried (each costs a fit of its fundamental part).
+    copies = lambda s: 2 if s.kind == "mirror" else s.order  # noqa: E731
+    best = None
+    tries = [0, 0]
+    for sym in sorted(found, key=lambda s: copies(s) > plain):
+        group = int(copies(sym) > plain)
+        if best is not None and len(best[0]) <= plain + _SYMMETRY_GROWTH:
             break
-        if plain < copies or boundary_gap(pts, sym) > limit:
+        if tries[group] == _SYMMETRY_CANDIDATES or copies(sym) > _written_limit(plain, 1):
             continue
-        tries += 1
-        i0, i1 = fundamental_split(pts, sym, corners=corners)
-        part = _fit_part(pts, corners, sym, i0, i1, tol, g1, method, plain, deadline)
-        if part is None:
+        if _symmetry_gap(pts, sym) > limit:
             continue
-        chain, full, part_corners = part
-        if len(full) > plain + _SYMMETRY_GROWTH or len(chain.curves) >= plain:
-            continue
-        errors = points_to_curves(pts, full)
-        if errors.max() <= tol * SAFETY and _curves_near_loop(full, pts, tol * SAFETY):
-            name = "mirror" if sym.kind == "mirror" else f"rotation:{sym.order}"
-            best = (full, chain.methods * copies, part_corners * copies,
-                    float(errors.max()), float(errors.mean()), name, len(chain.curves))
+        tries[group] += 1
+        fit = _try_symmetry(pts, corners, sym, tol, g1, method, plain, limit, deadline)
+        if fit is not None and (best is None or len(fit[0]) < len(best[0])):
+            best = fit
     return best
+
+
+def _try_symmetry(pts, corners, sym, tol: float, g1: bool, method: str, plain: int, limit: float,
+                  deadline: float | None) -> tuple | None:
+    """The outline of one symmetry's pooled part fit, or None when it is not cheaper in
+    independent curves, writes too many, or misses the loop by more than the tolerance."""
+    from pde2cad.image.symmetry import fundamental_split
+
+    copies = 2 if sym.kind == "mirror" else sym.order
+    shared = _shared_corners(pts, corners, sym, limit)
+    i0, i1 = fundamental_split(pts, sym, corners=shared if shared.size else None)
+    part = _fit_part(pts, shared, sym, i0, i1, tol, g1, method, plain, deadline)
+    if part is None:
+        return None
+    chain, full, part_corners = part
+    if len(full) > _written_limit(plain, len(chain.curves)) or len(chain.curves) >= plain:
+        return None
+    # The edge midpoints too: the pooled fit saw other copies' points between this loop's
+    # vertices, not its edges (a 20-tooth gear missed an edge midpoint by 1.14 px).
+    errors = points_to_curves(np.vstack([pts, 0.5 * (pts + np.roll(pts, -1, axis=0))]), full)
+    if errors.max() > tol * SAFETY or not _curves_near_loop(full, pts, tol * SAFETY):
+        return None
+    errors = errors[: len(pts)]
+    name = "mirror" if sym.kind == "mirror" else f"rotation:{sym.order}"
+    return (full, chain.methods * copies, part_corners * copies,
+            float(errors.max()), float(errors.mean()), name, len(chain.curves))
+
+
+def _symmetry_gap(pts: NDArray[np.float64], sym) -> float:
+    """:func:`~pde2cad.image.symmetry.boundary_gap` of ``sym`` and, for a rotation of order
+    k, of its power k // 2: a rotation by 2 pi / 19 maps a 20-tooth gear within a pixel of
+    itself (0.017 rad off), but nine of them miss it by a third of a tooth.
+    """
+    from pde2cad.image.symmetry import Symmetry, boundary_gap
+
+    gap = boundary_gap(pts, sym)
+    if sym.kind != "rotation" or sym.order < 4:
+        return gap
+    power = np.linalg.matrix_power(sym.matrix, sym.order // 2)
+    far = Symmetry("rotation", power, sym.center, sym.order, None, sym.iou)
+    return max(gap, boundary_gap(pts, far))
+
+
+def _written_limit(plain: int, fitted: int) -> int:
+    """Most curves a symmetric outline of ``fitted`` independent curves may write for a loop
+    whose plain fit has ``plain``: ``plain + _SYMMETRY_GROWTH``, or as many more as the part
+    saves (written + fitted <= 2 plain). A rotation by 2 pi / k is no symmetry of the pixel
+    grid, so the part must hold every copy's staircase within the tolerance and needs more
+    curves per turn than the plain fit; a smooth star then writes more curves than it fits.
+    """
+    return max(plain + _SYMMETRY_GROWTH, 2 * plain - fitted)
+
+
+def _shared_corners(pts: NDArray[np.float64], corners: NDArray[np.int64], sym, reach: float) -> NDArray[np.int64]:
+    """The corners whose images under every power of ``sym`` land within ``reach`` of a corner.
+
+    Off the pixel grid each copy is a different staircase, so the corner test fires on
+    some copies only (a smooth star's tips); a corner forced into the fundamental part is
+    forced into every copy, where it bends a curve off that copy's pixels.
+    """
+    if corners.size == 0:
+        return corners
+    where = pts[corners]
+    keep = np.ones(len(corners), bool)
+    image = where
+    for _ in range(1 if sym.kind == "mirror" else sym.order - 1):
+        image = sym.apply(image)
+        gap = np.linalg.norm(image[:, None, :] - where[None, :, :], axis=2).min(axis=1)
+        keep &= gap <= reach
+    return corners[keep]
+
+
+def _corner_tips(pts: NDArray[np.float64], corners: NDArray[np.int64], sym, tol: float) -> dict[int, NDArray[np.float64]]:
+    """Where each corner's curves end: the sharpened corner for an exact pixel symmetry,
+    else the corner vertex averaged with its copies' nearest corners mapped back.
+
+    A tip sharpened on one copy's staircase extrapolates that copy's raster; mapped onto
+    a copy that is a different staircase it can land over a pixel off it (star tips).
+    """
+    from pde2cad.image.symmetry import boundary_gap
+
+    if corners.size == 0:
+        return {}
+    if boundary_gap(pts, sym) < 1e-9:
+        return dict(zip(corners.tolist(), corner_positions(pts, corners, max_shift=0.75 * tol)))
+    where = pts[corners]
+    total, image = where.copy(), where
+    powers = 1 if sym.kind == "mirror" else sym.order - 1
+    for j in range(1, powers + 1):
+        image = sym.apply(image)
+        back = where[nearest(where, image)[1]]
+        for _ in range(j):
+            back = sym.inverse().apply(back)
+        total += back
+    return dict(zip(corners.tolist(), total / (powers + 1)))
 
 
 def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method: str, plain: int,
@@ -489,7 +599,7 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     pos, tan = denoise(run, closed=False)
     c_start, c_end = near(i0), near(i1)
     # The same sharpened corner points as the plain fit (corners between straight sides).
-    tips = dict(zip(corners.tolist(), corner_positions(pts, corners, max_shift=0.75 * tol))) if corners.size else {}
+    tips = _corner_tips(pts, corners, sym, tol)
     if sym.kind == "mirror":
         axis, center = sym.axis, sym.center
         p_start = center + np.dot(run[0] - center, axis) * axis
@@ -506,7 +616,7 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     local = local[(local > 2) & (local < length - 2)]
     merged, cuts, copies = _pooled_run(pts, sym, i0, i1, run, local)
     # Past this the outline grows too much (each junction may still merge two lines).
-    budget = (plain + _SYMMETRY_GROWTH + copies) // copies
+    budget = min(plain - 1, max((plain + _SYMMETRY_GROWTH + copies) // copies, (2 * plain + copies) // (copies + 1)))
     cut_points = [tips[int((i0 + c) % n)] for c in local] if len(cuts) == len(local) else None
     chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
                      cut_points, deadline)
@@ -601,9 +711,7 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
             parts.append(seg)
     params, owner = [], []
     for j, part in enumerate(parts):
-        step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
-        arc = np.r_[0.0, np.cumsum(step)]
-        params.append(arc / max(arc[-1], 1e-12))
+        params.append(_corner_param(part, run, local))
         owner.append(np.full(len(part), j))
     s = np.concatenate(params)
     own = np.concatenate(owner)
@@ -621,6 +729,26 @@ def _pooled_run(pts, sym, i0: int, i1: int, run, local):
     cuts = position[offset_run[local]] - first
     merged = merged[keep]
     return merged, np.sort(cuts[(cuts > 0) & (cuts < len(merged) - 1)]), len(parts)
+
+
+def _corner_param(part: NDArray[np.float64], run: NDArray[np.float64], local: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Parameters of a copy's points (mapped onto the run) for pooling: ``i + f`` on the
+    stretch between the copy's points nearest the run's corners ``i`` and ``i + 1``, ``f``
+    its arc-length fraction there.
+
+    Congruent copies off the pixel grid have stretches of different lengths (a stem one
+    pixel wider), so one arc-length fraction over the whole run would pool points from
+    beyond a corner into the next piece, which then cannot be straight.
+    """
+    inner = np.argmin(((part[None, :, :] - run[local][:, None, :]) ** 2).sum(axis=2), axis=1) if len(local) else local
+    anchors = np.r_[0, inner, len(part) - 1].astype(np.int64)
+    if np.any(np.diff(anchors) <= 0):
+        anchors = np.array([0, len(part) - 1])
+    step = np.linalg.norm(np.diff(denoise(part, closed=False)[0], axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(step)]
+    seg = np.clip(np.searchsorted(anchors, np.arange(len(part)), side="right") - 1, 0, len(anchors) - 2)
+    lo, hi = arc[anchors[seg]], arc[anchors[seg + 1]]
+    return seg + (arc - lo) / np.maximum(hi - lo, 1e-12)
 
 
 def _fit_run(
