@@ -362,7 +362,8 @@ def _add_reconstruct(sub: argparse._SubParsersAction) -> None:
                    "'auto' (a coarse quad remesh of the surface; the default for meshes and "
                    "clouds without labels)")
     p.add_argument("--crease-angle", type=_positive, default=30.0, metavar="DEG",
-                   help="auto layout: dihedral angle above which an edge is a crease (default 30)")
+                   help="auto layout: an edge is a crease when its dihedral exceeds what the "
+                   "surface around it bends per edge by more than DEG (default 30)")
     p.add_argument("--patches", type=int, metavar="N",
                    help="auto layout: about N patches (default: from curvature and point count)")
     p.add_argument("--patch-size", type=_positive, metavar="L",

@@ -372,7 +372,8 @@ def auto_layout(
     patch_size : float, optional
         About how long a patch side is (model units); overrides the default count.
     crease_angle : float
-        Dihedral angle (degrees) above which the remesher aligns to an edge as a crease.
+        Crease angle (degrees, :func:`pde2cad.layout.auto.crease_edges`); on a mesh with
+        creases the remesher also aligns to the edges bending by more than it.
     guide : (vertices, triangles), optional
         :func:`guide_mesh` of ``surface`` when already made (it is the slow step for a
         cloud, and the same for every layout tried).

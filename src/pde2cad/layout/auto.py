@@ -37,6 +37,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
+from pde2cad.layout.creases import crease_mask
 from pde2cad.layout.known import KnownCorners
 
 #: Samples per face side when faces are sampled for the nearest-face rule: a face's samples
@@ -652,7 +653,14 @@ def known_corners(
 def crease_edges(
     vertices: NDArray[np.float64], triangles: NDArray[np.int64], angle: float = CREASE_ANGLE
 ) -> NDArray[np.int64]:
-    """Edges of a triangle mesh whose two faces' normals differ by more than ``angle`` deg.
+    """Crease edges of a triangle mesh that bound a smooth region.
+
+    1. Creases: their faces' normals differ by more than ``angle`` deg beyond what the
+       surface around them bends per edge (:mod:`pde2cad.layout.creases`: the faceting of a
+       coarse curved mesh is no crease).
+    2. Of these, the edges whose two triangles lie in different :func:`crease_regions`: a
+       fragment that closes no loop (an outlier edge where a coarse mesh has a sliver, a
+       crease dying out) bounds no face of the part.
 
     Returns
     -------
@@ -661,9 +669,8 @@ def crease_edges(
     """
     tri = np.asarray(triangles, dtype=np.int64)
     edges, pair = _edge_faces(tri)
-    normal = _normals(vertices, tri)
-    cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
-    return edges[cos < np.cos(np.radians(angle))]
+    region = _smooth_components(pair, crease_mask(_normals(vertices, tri), pair, angle), len(tri))
+    return edges[region[pair[:, 0]] != region[pair[:, 1]]]
 
 
 def crease_regions(
@@ -672,10 +679,10 @@ def crease_regions(
 ) -> NDArray[np.int64]:
     """Smooth region of each triangle: triangles joined across edges that are no crease.
 
-    1. Triangles joined across edges whose dihedral angle is at most ``angle`` deg.
-    2. Regions smaller than ``min_area`` are no faces of the part: on a coarse organic mesh
-       (the 1.8k-vertex Stanford bunny: 10 % of its edges bend by over 25 deg) faceting
-       encloses specks of a few triangles that no patch could fill. Their triangles join
+    1. Triangles joined across edges that are no crease (:mod:`pde2cad.layout.creases`).
+    2. Regions smaller than ``min_area`` are no faces of the part: the rims of a coarse
+       organic mesh's thin parts (the bunny's ears, 1-2 edges across) bend like creases and
+       enclose specks of a few triangles that no patch could fill. Their triangles join
        the larger region next to them (grown across triangle edges).
 
     Returns
@@ -686,11 +693,7 @@ def crease_regions(
     """
     tri = np.asarray(triangles, dtype=np.int64)
     _, pair = _edge_faces(tri)
-    normal = _normals(vertices, tri)
-    cos = np.einsum("ij,ij->i", normal[pair[:, 0]], normal[pair[:, 1]])
-    smooth = pair[cos >= np.cos(np.radians(angle))]
-    g = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])), shape=(len(tri),) * 2)
-    _, region = connected_components(g, directed=False)
+    region = _smooth_components(pair, crease_mask(_normals(vertices, tri), pair, angle), len(tri))
     if min_area > 0:
         area = np.linalg.norm(np.cross(vertices[tri[:, 1]] - vertices[tri[:, 0]],
                                        vertices[tri[:, 2]] - vertices[tri[:, 0]]), axis=1) / 2
@@ -699,6 +702,14 @@ def crease_regions(
             region = _grow_into(region, ~small, pair)
     _, region = np.unique(region, return_inverse=True)
     return region.astype(np.int64)
+
+
+def _smooth_components(pair: NDArray[np.int64], crease: NDArray[np.bool_], n_faces: int
+                       ) -> NDArray[np.int64]:
+    """Connected component of each face, faces joined across the edges that are no crease."""
+    smooth = pair[~crease]
+    g = coo_matrix((np.ones(len(smooth)), (smooth[:, 0], smooth[:, 1])), shape=(n_faces,) * 2)
+    return connected_components(g, directed=False)[1].astype(np.int64)
 
 
 def region_borders(triangles: NDArray[np.int64], region: NDArray[np.int64]) -> int:
