@@ -342,9 +342,10 @@ def _check_segments(
     """InputError for segments that are too small or fall apart.
 
     A segment falls apart when its occupied voxels (side >= the neighbour radius) form more
-    than one 26-connected group holding >= COMPONENT_SHARE of its points. Points within the
-    radius of each other are in adjacent voxels, so this never splits what the neighbour
-    graph joins; it may join pieces less than ~3.5 radii apart.
+    than one 26-connected group holding >= COMPONENT_SHARE of its points
+    (:func:`_segment_pieces`). Points within the radius of each other are in adjacent
+    voxels, so this never splits what the neighbour graph joins; it may join pieces less
+    than ~3.5 radii apart.
     """
     small = present[counts < min_points]
     if small.size:
@@ -352,11 +353,37 @@ def _check_segments(
             f"segment {int(small[0])} has {int(counts[counts < min_points][0])} points; a "
             f"segment needs at least {min_points} (merge it into a neighbour or relabel it)"
         )
+    _, big, comp_seg = _segment_pieces(lab, present, counts, vox)
+    n_big = np.bincount(comp_seg[big], minlength=len(present))
+    split = np.flatnonzero(n_big > 1)
+    if split.size:
+        s = split[0]
+        raise InputError(
+            f"segment {int(present[s])} falls apart into {int(n_big[s])} separate pieces; "
+            "each segment must be one connected region — give each piece its own label"
+        )
+
+
+def _segment_pieces(
+    lab: NDArray[np.int64], present: NDArray[np.int64], counts: NDArray[np.int64], vox: _Voxels,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.int64]]:
+    """The 26-connected voxel groups of every segment.
+
+    Returns
+    -------
+    piece : (N,) int
+        Group of each point.
+    big : (G,) bool
+        Groups holding >= COMPONENT_SHARE of their segment's points.
+    group_segment : (G,) int
+        Index into ``present`` of each group's segment.
+    """
     n_lab = len(present)
     seg = np.searchsorted(present, lab[vox.order])
     # Graph nodes: (voxel, segment) pairs holding points. In voxel order the keys are nearly
     # sorted already (only mixed voxels are not): a stable (tim)sort is close to linear.
-    keys = np.sort(vox.vid[vox.order] * n_lab + seg, kind="stable")
+    point_keys = vox.vid[vox.order] * n_lab + seg
+    keys = np.sort(point_keys, kind="stable")
     first = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
     node, weight = keys[first], np.diff(np.r_[first, len(keys)])
     node_vid, node_seg = node // n_lab, node % n_lab
@@ -381,15 +408,56 @@ def _check_segments(
     size = np.bincount(comp, weights=weight)
     comp_seg = np.empty(len(size), dtype=np.int64)
     comp_seg[comp] = node_seg
-    big = size >= COMPONENT_SHARE * counts[comp_seg]
-    n_big = np.bincount(comp_seg[big], minlength=n_lab)
-    split = np.flatnonzero(n_big > 1)
-    if split.size:
-        s = split[0]
-        raise InputError(
-            f"segment {int(present[s])} falls apart into {int(n_big[s])} separate pieces; "
-            "each segment must be one connected region — give each piece its own label"
-        )
+    piece = np.empty(len(lab), dtype=np.int64)
+    piece[vox.order] = comp[np.searchsorted(node, point_keys)]
+    return piece, size >= COMPONENT_SHARE * counts[comp_seg], comp_seg
+
+
+def separate_pieces(
+    points: ArrayLike, labels: ArrayLike, first_new: int, k: int = 12, min_points: int = 50,
+) -> tuple[NDArray[np.int64], dict[int, list[int]]]:
+    """Labels with every segment that falls apart (as :func:`build_layout` checks it) cut
+    into its pieces: the piece with the most points keeps the label, each other piece of at
+    least ``COMPONENT_SHARE`` of the segment's points and ``min_points`` takes a new label
+    (``first_new``, ``first_new + 1``, ...); pieces of that share with fewer points join the
+    segment of their nearest point outside them; smaller crumbs stay with their label (the
+    check ignores them).
+
+    Returns
+    -------
+    labels : (N,) int
+        The input array itself when nothing falls apart.
+    pieces : dict[int, list[int]]
+        Per cut label, its pieces' labels (the first is the label itself).
+    """
+    pts, lab = _inputs(points, labels)
+    present, counts = np.unique(lab, return_counts=True)
+    _, _, radius = _neighbours(pts, k)
+    piece, big, comp_seg = _segment_pieces(lab, present, counts, _voxels(pts, radius))
+    size = np.bincount(piece, minlength=len(big))
+    n_big = np.bincount(comp_seg[big], minlength=len(present))
+    apart = np.flatnonzero(n_big > 1)
+    if not apart.size:
+        return np.asarray(labels), {}
+    out, pieces, new = lab.copy(), {}, int(first_new)
+    crumbs = np.zeros(len(big), dtype=bool)
+    for s in apart.tolist():
+        groups = np.flatnonzero(big & (comp_seg == s))
+        groups = groups[np.argsort(-size[groups], kind="stable")]
+        crumbs[groups[1:][size[groups[1:]] < min_points]] = True
+        groups = np.r_[groups[:1], groups[1:][size[groups[1:]] >= min_points]]
+        names = [int(present[s])] + list(range(new, new + len(groups) - 1))
+        for g, name in zip(groups[1:].tolist(), names[1:]):
+            out[piece == g] = name
+        new += len(groups) - 1
+        if len(names) > 1:
+            pieces[int(present[s])] = names
+    moving = crumbs[piece]
+    if moving.any() and not moving.all():
+        stay = np.flatnonzero(~moving)
+        _, near = cKDTree(pts[stay]).query(pts[moving], workers=-1)
+        out[moving] = out[stay[near]]
+    return out, pieces
 
 
 # --------------------------------------------------------------------------- on the surface
