@@ -10,9 +10,10 @@ cd "$(dirname "$0")"
 
 # freecad-python3: FreeCAD 0.20 (headless) for the surface benchmark's peer and the workbench;
 # freecad + xvfb: its GUI (and the GUI test under a virtual display); python3-scipy,
-# python3-pil, python3-ezdxf: the pde2cad core and its DXF writer inside FreeCAD's Python.
+# python3-pil, python3-ezdxf: the pde2cad core and its DXF writer inside FreeCAD's Python;
+# fonts-font-awesome: public pictograms, the clip-art set of the vectorize benchmark.
 APT_PACKAGES=(potrace libusb-1.0-0 libgl1 libgomp1 freecad-python3 freecad xvfb python3-scipy
-              python3-pil python3-ezdxf)
+              python3-pil python3-ezdxf fonts-font-awesome)
 PYTHON=${PYTHON:-python3}
 # Debian's own python3 needs python3-venv for `python3 -m venv` (ensurepip).
 "$PYTHON" -c "import venv, ensurepip" 2>/dev/null || APT_PACKAGES+=(python3-venv)

@@ -340,6 +340,38 @@ def _skimage_images() -> dict[str, np.ndarray]:
     return out
 
 
+#: Font Awesome 4.7 (Debian fonts-font-awesome): 675 pictograms, a public clip-art set.
+_ICON_FONTS = ("/usr/share/fonts/truetype/font-awesome/fontawesome-webfont.ttf",
+               "/usr/share/fonts-font-awesome/fonts/fontawesome-webfont.ttf")
+_ICONS = 116
+
+
+def _icon_images() -> dict[str, np.ndarray]:
+    """``_ICONS`` Font Awesome pictograms (every few code points of U+F000..U+F2E0 that
+    draw something), each at its own native size of 31-97 px (drawn at that size, as an
+    icon is), padded by 4 px."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    path = next((Path(p) for p in _ICON_FONTS if Path(p).exists()), None)
+    if path is None:
+        return {}
+    rng = np.random.default_rng(7)
+    probe = ImageFont.truetype(str(path), 64)
+    codes = [c for c in range(0xF000, 0xF2E1) if probe.getbbox(chr(c))[2] > probe.getbbox(chr(c))[0]]
+    picks = [codes[i] for i in np.linspace(0, len(codes) - 1, min(_ICONS, len(codes))).astype(int)]
+    out: dict[str, np.ndarray] = {}
+    for code in picks:
+        size = int(rng.integers(31, 98))
+        font = ImageFont.truetype(str(path), size)
+        x0, y0, x1, y1 = font.getbbox(chr(code))
+        im = Image.new("L", (x1 - x0 + 8, y1 - y0 + 8), 255)
+        ImageDraw.Draw(im).text((4 - x0, 4 - y0), chr(code), font=font, fill=0)
+        mask = np.asarray(im) < 128
+        if mask.any():
+            out[f"fa{code:04x}_{size}"] = mask
+    return out
+
+
 def _salt_pepper(mask: np.ndarray, rate: float, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return mask ^ (rng.random(mask.shape) < rate)
@@ -349,14 +381,16 @@ def make_unseen_sets(folder: Path) -> dict[str, list[Path]]:
     """Write the unseen image sets as PNGs into ``folder``; returns set name -> files.
 
     Sets: ``glyphs`` (15 characters x 4 fonts at 64 px), ``glyphs_4x`` (a third of them
-    upscaled 4x by pixel replication: staircase edges), ``packages`` (matplotlib's sample
+    upscaled 4x by pixel replication: staircase edges), ``icons`` and ``icons_4x`` (116
+    Font Awesome pictograms at native sizes of 31-97 px, and the same upscaled 4x: clip-art), ``packages`` (matplotlib's sample
     images thresholded by Otsu, DEM level sets), ``noisy`` (glyphs and package images with
     0.5 % salt-and-pepper pixels).
     """
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
-    sets: dict[str, list[Path]] = {"glyphs": [], "glyphs_4x": [], "packages": [], "skimage": [], "noisy": []}
+    sets: dict[str, list[Path]] = {"glyphs": [], "glyphs_4x": [], "icons": [], "icons_4x": [], "packages": [],
+                                   "skimage": [], "noisy": []}
 
     def save(kind: str, name: str, mask: np.ndarray) -> None:
         p = folder / f"{kind}__{name}.png"
@@ -376,6 +410,9 @@ def make_unseen_sets(folder: Path) -> dict[str, list[Path]]:
             save("glyphs_4x", name, np.kron(m, np.ones((4, 4), bool)))
         if i % 4 == 0:
             save("noisy", name, _salt_pepper(m, 0.005, i))
+    for name, m in _icon_images().items():
+        save("icons", name, m)
+        save("icons_4x", name, np.kron(m, np.ones((4, 4), bool)))
     for i, (name, m) in enumerate(_package_images().items()):
         save("packages", name, m)
         save("noisy", name, _salt_pepper(m, 0.005, 100 + i))
@@ -439,6 +476,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="write the unseen image sets (fonts, package images, noisy copies) into"
                     " DIR and report each set")
     ap.add_argument("--no-nosym", action="store_true", help="skip the symmetry=False run (faster)")
+    ap.add_argument("--sets", default="", metavar="A,B",
+                    help="with --unseen: only these sets (default all), e.g. icons,icons_4x")
     ap.add_argument("--batch-jobs", type=int, default=2, metavar="N",
                     help="with --unseen: also time one batch call per set with N workers (0: skip)")
     ap.add_argument("--json", type=Path, help="write all numbers to this JSON file")
@@ -522,6 +561,9 @@ def run_unseen(args: argparse.Namespace) -> int:
     """Benchmark every unseen set; print the rows, then one summary line per set."""
     vectorize = get_vectorize()
     sets = make_unseen_sets(args.unseen)
+    if args.sets:
+        wanted = {n.strip() for n in args.sets.split(",") if n.strip()}
+        sets = {k: v for k, v in sets.items() if k in wanted}
     head = table_header(True)
     summaries, all_rows = [], {}
     for name, paths in sets.items():
