@@ -63,6 +63,10 @@ C1_ERROR_RATIO = 3.0
 #: ... unless the C1 fit's mean error is below this fraction of the diagonal anyway: tangent
 #: continuity is worth a few 1e-5 (an ellipsoid's flat faces: C1 2.6x C0 but 3.9e-5).
 C1_ERROR_FLOOR = 5e-5
+#: ... and not when its deformation somewhere on the patch is more than this multiple of its
+#: largest at the points (swinging out where no point holds it: a 3-sided piece of a k-means
+#: capsule measured 46x, 3e-2 of the diagonal off the capsule; sound fits stay under 1.7x).
+C1_SWING_RATIO = 4.0
 #: Progress callback: ``progress(stage, done, total)``.
 Progress = Callable[[str, int, int], None]
 
@@ -104,7 +108,8 @@ class SurfaceModel:
     c0_fallback : list of int
         With ``continuity="c1"``: segments fitted C0 instead (too sparse for ribbons, or
         whose C1 fit was more than ``C1_ERROR_RATIO`` times worse and above
-        ``C1_ERROR_FLOOR`` of the diagonal); their edges are only positionally joined.
+        ``C1_ERROR_FLOOR`` of the diagonal, or whose deformation swings out between the
+        points, ``C1_SWING_RATIO``); their edges are only positionally joined.
         3-sided segments are fitted C1 like 4-sided ones (bicubic base with a collapsed top,
         see :func:`~pde2cad.surfaces.coons.apex_ribbon`).
     timings : dict[str, float]
@@ -327,6 +332,25 @@ def _build_network(
     return lab, layout, network, splits
 
 
+def _swing(patch: Patch) -> float:
+    """The patch's largest deformation (distance to its base) on a 21 x 21 parameter grid
+    over its largest at the points' own parameters."""
+    g = np.linspace(0.0, 1.0, 21)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    q = patch.params[~patch.outside]
+    grid = np.linalg.norm(patch.evaluate(u, v) - patch.base.evaluate(u, v), axis=1).max()
+    at = np.linalg.norm(patch.evaluate(q[:, 0], q[:, 1]) - patch.base.evaluate(q[:, 0], q[:, 1]), axis=1)
+    return float(grid / max(float(at.max(initial=0.0)), 1e-12))
+
+
+def _swings(c1: Patch, c0: Patch) -> bool:
+    """Whether the C1 fit swings out between the points (``_swing`` above
+    ``C1_SWING_RATIO``) where the C0 fit swings less (on a k-means capsule some C0 fits
+    swing too, 3x further off the capsule than their C1 fits: those stay C1)."""
+    ratio = _swing(c1)
+    return ratio > C1_SWING_RATIO and ratio > _swing(c0)
+
+
 def _fit_c1(
     patches: dict[int, Patch], network: EdgeNetwork, m: Terms, n: Terms,
     tolerance: float | None, tick: Callable[[], None],
@@ -353,12 +377,12 @@ def _fit_c1(
         except FitError:
             c1 = None
         # A bicubic base can misbehave near degenerate corners (two sides tangent) and
-        # creases (measured on the pot: 4 of its 9 patches): keep the C0 fit then, and
-        # say so in c0_fallback.
+        # creases (measured on the pot: 4 of its 9 patches), and a deformation swing out
+        # between the points: keep the C0 fit then, and say so in c0_fallback.
         # fit_errors: the fit's own mean (Patch.errors would project every point again).
         if c1 is not None and c1.fit_errors["mean"] <= max(
             C1_ERROR_RATIO * c0.fit_errors["mean"], C1_ERROR_FLOOR  # x the unit diagonal
-        ):
+        ) and not _swings(c1, c0):
             patches[label] = c1
         else:
             fallback.append(label)

@@ -169,6 +169,9 @@ class EdgeNetwork:
         Whether each corner admits the pairing (every edge in at most one pair).
     spans : dict[(int, int), int]
         Uniform spans of each edge curve.
+    creases : set of (int, int)
+        Shared edges whose two segments' own surfaces (fitted to their points) meet at more
+        than ``CREASE_ANGLE`` along them.
     """
 
     corners: NDArray[np.float64]
@@ -181,6 +184,7 @@ class EdgeNetwork:
     pairs: dict[int, list[tuple[Key, Key]]]
     regular: dict[int, bool]
     spans: dict[Key, int] = field(default_factory=dict)
+    creases: set[Key] = field(default_factory=set)
 
     def sides(self, label: int) -> list[PiecewiseBezier]:
         """The segment's sides as a head-to-tail loop (edges reversed where needed)."""
@@ -759,7 +763,8 @@ def build_edges(
         dist = np.linalg.norm(spline(t) - data[key], axis=1)
         errors[key], rms[key] = float(dist.max()), float(np.sqrt((dist**2).mean()))
         curves[key] = _to_bezier(spline, final[key], corners[key[0]], corners[key[1]])
-    return EdgeNetwork(corners, normals, loops, curves, users, errors, rms, pairs, regular, final)
+    return EdgeNetwork(corners, normals, loops, curves, users, errors, rms, pairs, regular, final,
+                       creases)
 
 
 def _orient(
