@@ -53,14 +53,25 @@ def _distance(mask: Mask, drawing: Drawing) -> float:
     return max(err["max_boundary_to_curve"], err["max_curve_to_boundary"])
 
 
-@pytest.mark.parametrize("make, kinds", [(_trefoil, {"rotation:3", "mirror"}), (_cog, {"rotation:8", "rotation:4", "mirror"}),
-                                         (_bean, {"mirror"})])
-def test_off_grid_symmetric_shape_found_and_cheaper(make: Callable[[], Mask], kinds: set[str]) -> None:
+@pytest.mark.parametrize("make, kinds, taken", [(_trefoil, {"rotation:3", "mirror"}, True),
+                                                (_cog, {"rotation:8", "rotation:4", "mirror"}, True),
+                                                (_bean, {"mirror"}, False)])
+def test_off_grid_symmetric_shape_found_and_cheaper(make: Callable[[], Mask], kinds: set[str], taken: bool) -> None:
     # Whichever symmetry writes fewest curves may win: a mirror of the cog can write fewer
     # than its eight-fold rotation, each copy of which must hold 8 staircases.
+    # The bean is borderline: its plain fit has 4 curves and its mirror part 2 or 3 (3 on
+    # numpy 2.4.6), which writes 6 > the limit of 5; its mirror must be found, and whether
+    # it is taken follows the limit.
     mask = make()
     with_sym = pde2cad.vectorize(mask, 1.0)
     without = pde2cad.vectorize(mask, 1.0, symmetry=False)
+    pts = trace_loops(mask)[0].points
+    names = {"mirror" if s.kind == "mirror" else f"rotation:{s.order}" for s in detect_symmetry(pts)}
+    assert names & kinds
+    if with_sym.loops[0].symmetry is None:
+        assert not taken
+        assert with_sym.n_curves == without.n_curves
+        return
     assert with_sym.loops[0].symmetry in kinds
     assert with_sym.n_fitted_curves < without.n_curves
     # The written outline grows by at most the curves the part saves (or by one).

@@ -74,3 +74,20 @@ def test_many_corners_split_into_quads_and_triangles_fast(n: int) -> None:
     assert set().union(*map(set, pieces)) == set(range(n))
     # a triangulated/quadrangulated n-gon: pieces' corner counts add up to n + 2 (pieces - 1)
     assert sum(len(q) for q in pieces) == n + 2 * (len(pieces) - 1)
+
+
+def test_a_piece_too_small_joins_the_piece_next_to_it() -> None:
+    """A split (or a sector cut) that leaves a sliver under the 50 points a segment needs
+    gives the sliver to the piece of its nearest point instead of refusing the layout."""
+    from pde2cad.layout.split import _absorb_small
+
+    pts = _sheet(4000, 3)
+    x = pts[:, 0]
+    which = np.where(x < 0.5, 0, np.where(x < 0.505, 1, 2)).astype(np.int64)  # piece 1: ~20 points
+    assert 0 < (which == 1).sum() < 50
+    out = _absorb_small(pts, which, 50)
+    assert sorted(np.unique(out).tolist()) == [0, 1]  # renumbered 0 .. Q-1
+    assert np.all(out[x < 0.49] == out[x < 0.49][0]) and np.all(out[x > 0.51] == out[x > 0.51][0])
+    assert out[x < 0.49][0] != out[x > 0.51][0]
+    assert np.array_equal(_absorb_small(pts, np.zeros(4000, np.int64), 50), np.zeros(4000))
+    assert _absorb_small(pts[:30], which[:30], 50).max() == 0  # every piece small: one piece

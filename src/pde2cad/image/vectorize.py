@@ -36,7 +36,8 @@ _SYMMETRY_GROWTH = 1
 # rotation orders up to this (gears have many teeth).
 _SYMMETRY_IOU = 0.85
 _SYMMETRY_MAX_ORDER = 24
-# The symmetry search may take this many times the plain fit's time (plus a floor, s).
+# The symmetry search may take this many times the plain fit's CPU time (plus a floor, s),
+# checked between candidates.
 _SYMMETRY_TIME = 5.0
 _SYMMETRY_MIN_S = 0.5
 # Crossing curves at most this many apart in a loop are replaced by the crack polygon
@@ -266,7 +267,7 @@ def _fit_loop(
 ) -> OutlineLoop:
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
-    begun = time.perf_counter()
+    begun = time.thread_time()
     chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
     hard = _straight_side_corners(pts, corners, tol) if g1 else corners
     if len(hard) < len(corners) and len(chain.fits) > 1:
@@ -281,7 +282,7 @@ def _fit_loop(
     # Straight sides are lines spanning both chords of the corner test (see merge_closed).
     chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
                             method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
-    plain_s = time.perf_counter() - begun
+    plain_s = time.thread_time() - begun  # CPU time: a loaded machine does not change it
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
     is_line = list(chain.lines) or [False] * len(curves)
@@ -415,10 +416,13 @@ def _search_symmetric(
     pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str,
     plain: int, plain_s: float, deadline: float | None,
 ) -> tuple | None:
-    """:func:`_fit_symmetric`, its part fits within :data:`_SYMMETRY_TIME` times the plain fit's.
+    """:func:`_fit_symmetric`, its candidates tried while their CPU time stays within
+    :data:`_SYMMETRY_TIME` times the plain fit's (plus :data:`_SYMMETRY_MIN_S`).
 
-    The time ratio, not an absolute limit, bounds the search: a loaded machine slows both
-    fits alike. Past the caller's own ``deadline`` the error propagates.
+    CPU time of this thread, and checked between candidates only, so the outcome does not
+    depend on the machine's load (a wall-clock deadline inside the part fits cut them short
+    on a loaded machine: a cog and a bean lost their symmetry). Past the caller's own
+    ``deadline`` the error propagates.
     """
     try:
         return _fit_symmetric(pts, corners, tol, g1, method, plain, plain_s, deadline)
@@ -466,9 +470,7 @@ def _fit_symmetric(
     if not could_be_symmetric(pts, limit, _SYMMETRY_MAX_ORDER):
         return None  # ~1 ms: most loops of a thresholded photo stop here
     found = detect_symmetry(pts, corners=corners, iou_min=_SYMMETRY_IOU, max_order=_SYMMETRY_MAX_ORDER)
-    if np.isfinite(plain_s):
-        local = time.perf_counter() + _SYMMETRY_TIME * plain_s + _SYMMETRY_MIN_S
-        deadline = local if deadline is None else min(local, deadline)
+    budget_end = time.thread_time() + _SYMMETRY_TIME * plain_s + _SYMMETRY_MIN_S
     # Candidates come best saving first, those with at most one copy per plain curve
     # ahead (only they can write at most _SYMMETRY_GROWTH more curves). The first that
     # passes that test is kept, else the one writing the fewest; only the first few of
@@ -484,6 +486,8 @@ def _fit_symmetric(
             continue
         if _symmetry_gap(pts, sym) > limit:
             continue
+        if sum(tries) and time.thread_time() > budget_end:
+            break  # the first candidate always runs to its end
         tries[group] += 1
         fit = _try_symmetry(pts, corners, sym, tol, g1, method, plain, limit, deadline)
         if fit is not None and (best is None or len(fit[0]) < len(best[0])):

@@ -418,6 +418,22 @@ def _split_one(
     return np.unique(cell, return_inverse=True)[1].reshape(-1)
 
 
+def _absorb_small(points: NDArray[np.float64], which: NDArray[np.int64], least: int) -> NDArray[np.int64]:
+    """Pieces (``which``, 0 .. P-1) of fewer than ``least`` points given to the piece of
+    their nearest point in a larger piece; renumbered 0 .. Q-1 (all 0 when no piece is
+    that large)."""
+    small = np.bincount(which)[which] < least
+    if small.all():
+        return np.zeros_like(which)
+    if not small.any():
+        return which
+    keep = np.flatnonzero(~small)
+    _, near = cKDTree(points[keep]).query(points[small], workers=-1)
+    out = which.copy()
+    out[small] = which[keep[near]]
+    return np.unique(out, return_inverse=True)[1].reshape(-1)
+
+
 def _side_labels(
     points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, loop: NDArray[np.int64],
     at: NDArray[np.int64], label: int, reach: float,
@@ -761,7 +777,12 @@ def _split_cornerless(
         cell = _sectors(points[members], alone)
         if cell is None:
             continue
-        cell = np.unique(cell, return_inverse=True)[1].reshape(-1)
+        # A sector too small for a segment (a segment of a few hundred points) joins the
+        # sector next to it.
+        cell = _absorb_small(points[members], np.unique(cell, return_inverse=True)[1].reshape(-1),
+                             MIN_PIECE_POINTS)
+        if cell.max() == 0:
+            continue
         out = out.copy() if out is labels else out
         start = max(int(out.max()) + 1, first_new)
         names = [label] + list(range(start, start + int(cell.max())))
@@ -890,6 +911,11 @@ def split_segments(
                 CORNER_REACH * layout.radius,
             )
             counts = np.bincount(which)
+            if counts.min() < MIN_PIECE_POINTS and len(counts) > 2:
+                # A sliver piece (a chord close to a side) joins the piece next to it; that
+                # piece's extra corners are split in the next round.
+                which = _absorb_small(points[members], which, MIN_PIECE_POINTS)
+                counts = np.bincount(which)
             if counts.min() < MIN_PIECE_POINTS:
                 raise InputError(
                     f"segment {first} has {len(ids)} corners and splitting it into 3/4-sided "
