@@ -452,12 +452,20 @@ def separate_pieces(
         new += len(groups) - 1
         if len(names) > 1:
             pieces[int(present[s])] = names
-    moving = crumbs[piece]
-    if moving.any() and not moving.all():
-        stay = np.flatnonzero(~moving)
-        _, near = cKDTree(pts[stay]).query(pts[moving], workers=-1)
-        out[moving] = out[stay[near]]
-    return out, pieces
+    return take_nearest(pts, out, crumbs[piece]), pieces
+
+
+def take_nearest(points: NDArray[np.float64], labels: NDArray[np.int64], moving: NDArray[np.bool_]
+                 ) -> NDArray[np.int64]:
+    """``labels`` with every ``moving`` point given the label of its nearest point that does
+    not move (unchanged when none or all move)."""
+    if not moving.any() or moving.all():
+        return labels
+    stay = np.flatnonzero(~moving)
+    _, near = cKDTree(points[stay]).query(points[moving], workers=-1)
+    out = labels.copy()
+    out[moving] = labels[stay[near]]
+    return out
 
 
 # --------------------------------------------------------------------------- on the surface

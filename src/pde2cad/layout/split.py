@@ -60,7 +60,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
-from pde2cad.layout.adjacency import Layout, build_layout, separate_pieces
+from pde2cad.layout.adjacency import Layout, build_layout, separate_pieces, take_nearest
 from pde2cad.layout.edges import filter_corners
 from pde2cad.layout.rings import boundary_loops, split_rings
 from pde2cad.surfaces.region import pca_frame
@@ -425,13 +425,8 @@ def _absorb_small(points: NDArray[np.float64], which: NDArray[np.int64], least: 
     small = np.bincount(which)[which] < least
     if small.all():
         return np.zeros_like(which)
-    if not small.any():
-        return which
-    keep = np.flatnonzero(~small)
-    _, near = cKDTree(points[keep]).query(points[small], workers=-1)
-    out = which.copy()
-    out[small] = which[keep[near]]
-    return np.unique(out, return_inverse=True)[1].reshape(-1)
+    out = take_nearest(points, which, small)
+    return out if out is which else np.unique(out, return_inverse=True)[1].reshape(-1)
 
 
 def _side_labels(
