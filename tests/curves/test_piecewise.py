@@ -102,3 +102,41 @@ def test_blunt_corner_between_straight_sides_moves_to_the_lines_meeting_point():
     arc = np.c_[np.cos(th), np.sin(th)] * 6
     kept = corner_positions(np.vstack([arc, arc[::-1] * [1, -1]]), np.array([19]))[0]
     assert np.array_equal(kept, arc[-1])
+
+
+def _scalloped(n_sides=6, per_side=30, bulge=3.0):
+    """A closed loop of ``n_sides`` arcs bulging outwards between sharp corners."""
+    corners = 40.0 * np.c_[np.cos(2 * np.pi * np.arange(n_sides) / n_sides), np.sin(2 * np.pi * np.arange(n_sides) / n_sides)]
+    pts = []
+    for a, b in zip(corners, np.roll(corners, -1, axis=0)):
+        u = np.linspace(0.0, 1.0, per_side, endpoint=False)[:, None]
+        normal = np.array([b[1] - a[1], a[0] - b[0]]) / np.linalg.norm(b - a)
+        pts.append(a + u * (b - a) + bulge * np.sin(np.pi * u) * -normal)
+    return np.vstack(pts), np.arange(n_sides) * per_side
+
+
+def test_corner_runs_fitted_together_give_the_same_curves_in_fewer_batches(monkeypatch):
+    # fit_closed fits every run between corners as one piece up front, in one batch (and
+    # one for the other parameterizations): the same curves as run by run, fewer batches.
+    from pde2cad.curves import batchfit, piecewise
+
+    pts, corners = _scalloped()
+    calls = []
+    real = batchfit.fit_batch
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(batchfit, "fit_batch", counted)
+    piecewise.clear_fit_cache()
+    together, _ = fit_closed(pts, 0.5, corners=corners)
+    n_together = len(calls)
+    monkeypatch.setattr(piecewise, "prefetch_whole_runs", lambda *args: None)
+    piecewise.clear_fit_cache()
+    calls.clear()
+    alone, _ = fit_closed(pts, 0.5, corners=corners)
+    assert len(together.curves) == len(alone.curves) == 6  # one arc per side
+    assert np.abs(together.curves - alone.curves).max() < 1e-9
+    assert points_to_curves(pts, together.curves).max() <= 0.5
+    assert n_together < len(calls)

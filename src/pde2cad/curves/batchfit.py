@@ -39,8 +39,26 @@ class Batch:
 
 
 def _dot(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Dot products along the last axis (``einsum`` is many times slower on small axes)."""
-    return (x * y).sum(axis=-1)
+    """Dot products along the last axis (``einsum`` is many times slower on small axes).
+
+    Over a point's 2 or 3 coordinates the products are added one by one, in the order
+    the reduction adds them (the same numbers, at half its cost on such short axes)."""
+    if x.shape[-1] <= 3 and y.shape[-1] == x.shape[-1]:
+        out = x[..., 0] * y[..., 0]
+        for i in range(1, x.shape[-1]):
+            out = out + x[..., i] * y[..., i]
+        return out
+    return _ADD(x * y, axis=-1)
+
+
+# The ufunc reductions themselves: ``ndarray.sum`` and ``np.clip`` pass through Python
+# wrappers that cost as much as the arithmetic on these small arrays.
+_ADD = np.add.reduce
+
+
+def _unit_clip(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.clip(x, 0, 1)``."""
+    return np.minimum(np.maximum(x, 0.0), 1.0)
 
 
 def _basis(batch: Batch):
@@ -102,17 +120,20 @@ def fit_batch(
     l22 = lin2.transpose(0, 2, 1) @ lin2
     k = lin1.shape[2]
 
-    def inner(x):
+    def inner(x, r=None):
+        if r is not None:  # the problems r only
+            return base1[r] + (lin1[r] @ x[..., None])[..., 0], base2[r] + (lin2[r] @ x[..., None])[..., 0]
         return base1 + (lin1 @ x[..., None])[..., 0], base2 + (lin2 @ x[..., None])[..., 0]
 
-    def state(t_, x_):
+    def state(t_, x_, r=None):
+        q0, q3, q, w1, w3 = (p0, p3, pts, sw, sw3) if r is None else (p0[r], p3[r], pts[r], sw[r], sw3[r])
         s_ = 1.0 - t_
         ts = 3.0 * t_ * s_
         a_, b_ = ts * s_, ts * t_
-        p1_, p2_ = inner(x_)
-        curve = ((s_ * s_ * s_)[..., None] * p0[:, None] + a_[..., None] * p1_[:, None]
-                 + b_[..., None] * p2_[:, None] + (t_ * t_ * t_)[..., None] * p3[:, None])
-        return a_ * sw, b_ * sw, s_, p1_, p2_, (curve - pts) * sw3
+        p1_, p2_ = inner(x_, r)
+        curve = ((s_ * s_ * s_)[..., None] * q0[:, None] + a_[..., None] * p1_[:, None]
+                 + b_[..., None] * p2_[:, None] + (t_ * t_ * t_)[..., None] * q3[:, None])
+        return a_ * w1, b_ * w1, s_, p1_, p2_, (curve - q) * w3
 
     def hessian(aw, bw):
         return (_dot(aw, aw)[:, None, None] * l11 + _dot(aw, bw)[:, None, None] * l12
@@ -130,9 +151,10 @@ def fit_batch(
     h0 = hessian(a0, b0)
     x = (np.linalg.pinv(h0) @ (-project(a0, b0, c0))[..., None])[..., 0]
     aw, bw, s, p1, p2, resid = state(t, x)
-    cost = _dot(resid, resid).sum(axis=1)
+    cost = _ADD(_dot(resid, resid), axis=1)
     lam = np.full(len(pts), 1e-3)
     active = np.ones(len(pts), bool)
+    eye_k = np.eye(k)
     # 2. joint Levenberg-Marquardt rounds
     for _ in range(rounds):
         if not active.any():
@@ -144,29 +166,36 @@ def fit_batch(
         jtr = _dot(jt, resid)
         hh = hessian(aw, bw)
         r0 = project(aw, bw, resid)
-        diag = np.diagonal(hh, axis1=1, axis2=2) + 1e-12
+        diag = hh.diagonal(axis1=1, axis2=2) + 1e-12
         pending = active.copy()
         for _try in range(4):
-            cd = ct * (1.0 + lam[:, None]) + 1e-12
-            gs = g / cd[..., None]
-            h = hh - g.transpose(0, 2, 1) @ gs + lam[:, None, None] * (diag[:, :, None] * np.eye(k))
-            dx = _solve(h, -(r0 - (gs.transpose(0, 2, 1) @ jtr[..., None])[..., 0]))
-            t_new = np.clip(t - (jtr + (g @ dx[..., None])[..., 0]) / cd, 0.0, 1.0)
-            x_new = x + dx
-            new = state(t_new, x_new)
-            cost_new = _dot(new[-1], new[-1]).sum(axis=1)
-            take = pending & (cost_new < cost)
-            if take.all():  # the usual case: every problem improves, no row selection
-                x, t, cost = x_new, t_new, cost_new
-                aw, bw, s, p1, p2, resid = new
-                lam = np.maximum(lam / 3.0, 1e-7)
-            elif take.any():
-                x[take], t[take], cost[take] = x_new[take], t_new[take], cost_new[take]
-                aw[take], bw[take], s[take] = new[0][take], new[1][take], new[2][take]
-                p1[take], p2[take], resid[take] = new[3][take], new[4][take], new[5][take]
-                lam[take] = np.maximum(lam[take] / 3.0, 1e-7)
-            lam[pending & ~take] *= 10.0
-            pending &= ~take
+            if pending.all():
+                cd = ct * (1.0 + lam[:, None]) + 1e-12
+                gs = g / cd[..., None]
+                h = hh - g.transpose(0, 2, 1) @ gs + lam[:, None, None] * (diag[:, :, None] * eye_k)
+                dx = _solve(h, -(r0 - (gs.transpose(0, 2, 1) @ jtr[..., None])[..., 0]))
+                t_new = _unit_clip(t - (jtr + (g @ dx[..., None])[..., 0]) / cd)
+                new = state(t_new, x + dx)
+                cost_new = _ADD(_dot(new[-1], new[-1]), axis=1)
+                if (cost_new < cost).all():  # the usual case: every problem improves, no row selection
+                    x, t, cost = x + dx, t_new, cost_new
+                    aw, bw, s, p1, p2, resid = new
+                    lam = np.maximum(lam / 3.0, 1e-7)
+                    pending[:] = False
+                    break
+                rows = np.arange(len(pts))
+            else:
+                # Retries (and problems that stopped) cost only the problems still pending.
+                rows = np.flatnonzero(pending)
+                t_new, dx, new, cost_new = _retry(rows, x, t, lam, (ct, g, hh, diag, r0, jtr), eye_k, state)
+            take = cost_new < cost[rows]
+            got = rows[take]
+            x[got], t[got], cost[got] = x[got] + dx[take], t_new[take], cost_new[take]
+            aw[got], bw[got], s[got] = new[0][take], new[1][take], new[2][take]
+            p1[got], p2[got], resid[got] = new[3][take], new[4][take], new[5][take]
+            lam[got] = np.maximum(lam[got] / 3.0, 1e-7)
+            lam[rows[~take]] *= 10.0
+            pending[got] = False
             if not pending.any():
                 break
         active &= ~pending
@@ -176,6 +205,19 @@ def fit_batch(
     t = _newton(ctrl, pts, t)
     errors = np.where(valid, np.linalg.norm(_evaluate(ctrl, t) - pts, axis=2), 0.0)
     return ctrl, t, errors
+
+
+def _retry(rows, x, t, lam, step, eye_k, state):
+    """The damped step of :func:`fit_batch` for the problems ``rows`` only (``step`` holds
+    the round's ``ct, g, hh, diag, r0, jtr``): new parameters, control-point step, state, cost."""
+    ct, g, hh, diag, r0, jtr = (a[rows] for a in step)
+    cd = ct * (1.0 + lam[rows][:, None]) + 1e-12
+    gs = g / cd[..., None]
+    h = hh - g.transpose(0, 2, 1) @ gs + lam[rows][:, None, None] * (diag[:, :, None] * eye_k)
+    dx = _solve(h, -(r0 - (gs.transpose(0, 2, 1) @ jtr[..., None])[..., 0]))
+    t_new = _unit_clip(t[rows] - (jtr + (g @ dx[..., None])[..., 0]) / cd)
+    new = state(t_new, x[rows] + dx, rows)
+    return t_new, dx, new, _ADD(_dot(new[-1], new[-1]), axis=1)
 
 
 def _clamped(batch: Batch, t, valid, p1, p2):
@@ -223,7 +265,7 @@ def _newton(ctrl, pts, t):
     num = _dot(diff, d1)
     den = _dot(d1, d1) + _dot(diff, d2)
     step = np.divide(num, den, out=np.zeros_like(num), where=np.abs(den) > 1e-12)
-    return np.clip(t - step, 0.0, 1.0)
+    return _unit_clip(t - step)
 
 
 def minimax_batch(batch: Batch, ctrl, t, errors, iterations: int = 3):
@@ -301,7 +343,7 @@ def curve_to_polyline_batch(
     ab = pts[rows, np.minimum(edge + 1, (count - 1)[:, None, None])] - a
     rel = s[:, :, None, :] - a
     len2 = np.maximum(_dot(ab, ab), 1e-300)
-    h = np.clip(_dot(rel, ab) / len2, 0.0, 1.0)
+    h = _unit_clip(_dot(rel, ab) / len2)
     off = rel - h[..., None] * ab
     d2 = _dot(off, off)
     return np.sqrt(d2.min(axis=2).max(axis=1))

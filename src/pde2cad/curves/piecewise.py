@@ -174,6 +174,9 @@ class _Fitter:
         names = self.names if names is None else names
         starts = np.asarray(starts, dtype=np.int64)
         stops = np.asarray(stops, dtype=np.int64)
+        searched = [n for n in names if n in self.names]
+        if 0 < len(searched) < len(names):
+            return self._fit_spans_split(starts, stops, p0s, p3s, tan0s, tan3s, names, searched)
         keys = self._keys(starts, stops, p0s, p3s, tan0s, tan3s, names)
         out: list[tuple[CubicFit, bool] | None] = [_CACHE.get(k) for k in keys]
         todo = np.array([j for j, hit in enumerate(out) if hit is None], dtype=np.int64)
@@ -184,6 +187,27 @@ class _Fitter:
                 out[j] = result
                 _CACHE.put(keys[j], result)
         return out  # type: ignore[return-value]
+
+    def _fit_spans_split(
+        self, starts, stops, p0s, p3s, tan0s, tan3s, names: list[str], searched: list[str],
+    ) -> list[tuple[CubicFit, bool]]:
+        """:meth:`fit_spans` with ``names``, the ``searched`` ones fitted apart from the rest.
+
+        The break search has fitted most spans with the search parameterizations already
+        (the cache holds them), so only the other parameterizations cost a fit. The pick is
+        :meth:`_fit_spans`'s: passing first, then the least maximum error, then the earlier
+        name of ``names``."""
+        rest = [n for n in names if n not in searched]
+        both = zip(self.fit_spans(starts, stops, p0s, p3s, tan0s, tan3s, searched),
+                   self.fit_spans(starts, stops, p0s, p3s, tan0s, tan3s, rest))
+        return [min(pair, key=lambda r: (not r[1], r[0].max_error, names.index(r[0].method))) for pair in both]
+
+    def cached(self, start: int, stop: int, p0, tan0, p3, tan3) -> bool:
+        """Whether the fit of points[start..stop] with these ends is in the cache."""
+        rows = [None if v is None else np.asarray(v, dtype=float)[None]
+                for v in (p0, p3, None if tan0 is None else _unit(tan0), tan3)]
+        return _CACHE.get(self._keys(np.array([start]), np.array([stop]), rows[0], rows[1], rows[2], rows[3],
+                                     self.names)[0]) is not None
 
     def _keys(self, starts, stops, p0s, p3s, tan0s, tan3s, names: list[str]) -> list[bytes]:
         """One digest per span of everything its fit depends on: the span's points and
@@ -438,15 +462,12 @@ def fit_chain(
     corners: list[int] = []
     guess = 32
     p0 = first_p
-    all_ok = True
+    spans: list[tuple[Any, ...]] = []
+    oks: list[bool] = []
     while start < end:
         if deadline is not None and time.perf_counter() > deadline:
             raise DeadlineExceeded("the fit ran past its deadline")
-        fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
-        if ok:
-            stop = end
-        else:
-            stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess)
+        stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess, (last_p, final_tan))
         if stop < end and prefer_breaks is not None and not prefer_breaks[stop]:
             stop, fit, ok = _snap_to_kink(fitter, start, stop, fit, ok, p0, tan, joins, prefer_breaks)
         if stop < end and end - stop < MIN_POINTS - 1:
@@ -461,16 +482,11 @@ def fit_chain(
                     ok = True
         p3 = last_p if stop == end else joins[stop]
         t3 = final_tan if stop == end else (None if jtan is None else jtan[stop])
-        if len(fitter.all_names) > len(fitter.names):
-            best, best_ok = fitter.fit_many(
-                start, np.array([stop]), p0, p3[None], tan, None if t3 is None else t3[None], fitter.all_names
-            )[0]
-            if (best_ok, -best.max_error) >= (ok, -fit.max_error):
-                fit, ok = best, best_ok
-        all_ok = all_ok and ok
+        spans.append((start, stop, p0, p3, tan, t3))
+        oks.append(ok)
         pieces.append(fit)
         if max_pieces is not None and len(pieces) > max_pieces and stop < end:
-            all_ok = False
+            oks.append(False)
             break
         breaks.append(stop)
         guess = max(stop - start, MIN_POINTS)
@@ -479,6 +495,9 @@ def fit_chain(
         tan = t3 if stop < end else None
         p0 = p3
         start = stop
+    if len(fitter.all_names) > len(fitter.names):
+        pieces, oks[: len(spans)] = _refit_all_names(fitter, spans, pieces, oks[: len(spans)])
+    all_ok = all(oks)
     curves = np.stack([f.ctrl for f in pieces]) if pieces else np.zeros((0, 4, pts.shape[1]))
     chain = ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners, all_ok)
     if not all_ok and g1 and c0_fallback:
@@ -491,6 +510,35 @@ def fit_chain(
         if fallback.ok or fallback.max_error < chain.max_error:
             return fallback
     return chain
+
+
+def _refit_all_names(
+    fitter: _Fitter, spans: list[tuple[Any, ...]], fits: list[CubicFit], oks: list[bool]
+) -> tuple[list[CubicFit], list[bool]]:
+    """Each piece's fit replaced by its fit with every parameterization where that is at
+    least as good (passing first, then the least maximum error).
+
+    ``spans`` holds each piece's (start, stop, p0, p3, tan0, tan3); the pieces are refitted
+    together, one batch per kind of end constraint, after the break search has placed them
+    all (the search does not depend on the refits)."""
+    fits, oks = list(fits), list(oks)
+    dim = fitter.points.shape[1]
+    for has0 in (False, True):
+        for has3 in (False, True):
+            sel = [i for i, sp in enumerate(spans) if (sp[4] is not None) == has0 and (sp[5] is not None) == has3]
+            if not sel:
+                continue
+            rows = [spans[i] for i in sel]
+            res = fitter.fit_spans(
+                np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                np.stack([r[2] for r in rows]).reshape(-1, dim), np.stack([r[3] for r in rows]).reshape(-1, dim),
+                np.stack([r[4] for r in rows]).reshape(-1, dim) if has0 else None,
+                np.stack([r[5] for r in rows]).reshape(-1, dim) if has3 else None, fitter.all_names,
+            )
+            for i, (best, best_ok) in zip(sel, res):
+                if (best_ok, -best.max_error) >= (oks[i], -fits[i].max_error):
+                    fits[i], oks[i] = best, best_ok
+    return fits, oks
 
 
 #: Shared join tangents tried per sweep, as blends ``(1 - w) a + w b`` of the two C0
@@ -661,13 +709,16 @@ def _test(fitter: _Fitter, start: int, stops, p0, tan, p3s, tan3s) -> list[tuple
 
 
 def _longest_prefix(
-    fitter: _Fitter, start: int, end: int, p0: NDArray[np.float64], tan, joins, jtan, guess: int
+    fitter: _Fitter, start: int, end: int, p0: NDArray[np.float64], tan, joins, jtan, guess: int, tail=None,
 ) -> tuple[int, CubicFit, bool]:
-    """Largest stop in (start, end) such that points[start..stop] pass the test; ``end`` is
-    known to fail.
+    """Largest stop in (start, end] such that points[start..stop] pass the test.
 
-    Algorithm 1's bisection, with many candidates per step: 1. test a spread of lengths
-    around ``guess`` (the previous piece's) in one batch; 2. keep the longest passing one as
+    ``tail`` (end point, end tangent or None) are the ends of the whole rest start..end,
+    taken when it passes; None: ``end`` is known to fail.
+    Algorithm 1's bisection, with many candidates per step: 0. test the whole rest, in the
+    first batch when the spread reaches ``end`` (no longer rows, one batch less); 1. test
+    a spread of lengths around ``guess`` (the previous piece's) in one batch; 2. keep the
+    longest passing one as
     the lower bracket and the shortest failing one above it as the upper; 3. test
     ``_ROUND`` evenly spaced stops inside the bracket, again in one batch, until it closes.
     Each batch shrinks the bracket about ninefold, so a few batches replace ~10 sequential
@@ -679,15 +730,29 @@ def _longest_prefix(
         return _test(fitter, start, cands, p0, tan, joins[cands], None if jtan is None else jtan[cands])
 
     lo = max(start + 1, min(start + MIN_POINTS - 1, end - 1))
+    spread = start + np.round(max(guess, MIN_POINTS - 1) * _SPREAD).astype(np.int64)
+    cands = np.unique(np.clip(np.r_[lo, spread], lo, end - 1))
+    first = None
+    if tail is not None:
+        fold = (lo < end and spread[-1] >= end and (tail[1] is None) == (jtan is None)
+                and not fitter.cached(start, end, p0, tan, tail[0], tail[1]))
+        rows = np.r_[cands, end] if fold else np.array([end])
+        p3s = np.vstack([joins[rows[:-1]], tail[0][None]])
+        t3s = None if tail[1] is None else tail[1][None]
+        if fold and t3s is not None:
+            t3s = np.vstack([jtan[cands], t3s])
+        results = _test(fitter, start, rows, p0, tan, p3s, t3s)
+        if results[-1][1]:
+            return end, results[-1][0], True
+        first = results[:-1] if fold else None
     if lo >= end:  # two points left: nothing shorter to try
         fit, good = test(np.array([end]))[0]
         return end, fit, good
     hi = end
     lo_fit: CubicFit | None = None
-    cands = start + np.round(max(guess, MIN_POINTS - 1) * _SPREAD).astype(np.int64)
-    cands = np.unique(np.clip(np.r_[lo, cands], lo, end - 1))
     while cands.size:
-        results = test(cands)
+        results = test(cands) if first is None else first
+        first = None
         passing = [(c, f) for c, (f, good) in zip(cands.tolist(), results) if good]
         if passing and (lo_fit is None or passing[-1][0] > lo):
             lo, lo_fit = passing[-1]
@@ -861,10 +926,14 @@ def fit_closed(
     curves: list[NDArray[np.float64]] = []
     fits: list[CubicFit] = []
     breaks, corner_list, flags = [0], [], []
+    runs = [closed[a : b + 1] for a, b in zip(cuts[:-1], cuts[1:])]
+    smoothed = [denoise(run, closed=False) if smooth else (run, tangents(run)) for run in runs]
+    straight = [line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None for j, run in enumerate(runs)]
+    curved = [j for j, c in enumerate(straight) if c is None]
+    prefetch_whole_runs([runs[j] for j in curved], [smoothed[j][0] for j in curved], tips[curved],
+                        tips[np.asarray(curved, dtype=np.int64) + 1], tolerance, method)
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
-        run = closed[a : b + 1]
-        pos, tan = denoise(run, closed=False) if smooth else (run, tangents(run))
-        chain = line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None
+        run, (pos, tan), chain = runs[j], smoothed[j], straight[j]
         if chain is None:
             chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
                               param_points=pos, join_tangents=tan, method=method, deadline=deadline,
@@ -879,6 +948,45 @@ def fit_closed(
     chain = ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64), sorted(set(corner_list)))
     chain.lines = flags
     return chain, offset
+
+
+def prefetch_whole_runs(
+    runs: list[NDArray[np.float64]], params: list[NDArray[np.float64]], p_starts: NDArray[np.float64],
+    p_ends: NDArray[np.float64], tolerance: float, method: str,
+) -> None:
+    """Fit each run as one C0 piece (every parameterization where the search ones pass),
+    all runs in a few batches, into the fit cache.
+
+    The runs between a loop's corners are fitted one :func:`fit_chain` after the other, and
+    each begins by testing its whole run: most runs are one piece, and their two fits (the
+    test and the refit with every parameterization) then cost a batch each. Fitted here
+    together, :func:`fit_chain` finds them in the cache. Runs are batched by length
+    (sorted, a batch closed where padding would more than double its points).
+    """
+    if len(runs) < 2:
+        return
+    fitter = _Fitter(np.concatenate(runs), tolerance, np.concatenate(params), method, NEWTON_ROUNDS, True)
+    sizes = np.array([len(r) for r in runs], dtype=np.int64)
+    starts = np.r_[0, np.cumsum(sizes)[:-1]]
+    rest = [n for n in fitter.all_names if n not in fitter.names]
+    for group in _length_groups(sizes):
+        res = fitter.fit_spans(starts[group], starts[group] + sizes[group] - 1, p_starts[group], p_ends[group], None, None)
+        good = group[[ok for _, ok in res]]
+        if rest and good.size:
+            fitter.fit_spans(starts[good], starts[good] + sizes[good] - 1, p_starts[good], p_ends[good], None, None, rest)
+
+
+def _length_groups(sizes: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Indices of ``sizes`` in groups of similar size: sorted, a new group begun where
+    padding to the group's largest would more than double its points."""
+    order = np.argsort(sizes, kind="stable")
+    groups: list[list[int]] = [[]]
+    for i in order.tolist():
+        g = groups[-1]
+        if g and sizes[i] * (len(g) + 1) > 2 * (int(sizes[g].sum()) + sizes[i]):
+            groups.append([])
+        groups[-1].append(i)
+    return [np.asarray(g, dtype=np.int64) for g in groups if g]
 
 
 def fit_closed_free(
