@@ -34,6 +34,7 @@ def test_a_small_segment_joins_the_neighbour_with_the_longest_border() -> None:
     # borders: with 1 along 0.25, with 2 along 0.25 + 2 x 0.008, with 0 along 0.008
     assert np.all(out[strip] == 2) and np.array_equal(out[~strip], lab[~strip])
     assert np.all(merge_small(pts, lab, 50, avoid={7: {2}})[strip] == 1)
+    assert np.all(merge_small(pts, lab, 50, prefer={7: {0}})[strip] == 0)  # touches 0 at its end
     assert merge_small(pts, out, 50) is out  # nothing small: the input itself
 
 

@@ -470,7 +470,8 @@ def take_nearest(points: NDArray[np.float64], labels: NDArray[np.int64], moving:
 
 def merge_small(
     points: NDArray[np.float64], labels: NDArray[np.int64], least: int,
-    avoid: dict[int, set[int]] | None = None, k: int = 12,
+    avoid: dict[int, set[int]] | None = None, prefer: dict[int, set[int]] | None = None,
+    k: int = 12,
 ) -> NDArray[np.int64]:
     """``labels`` with every segment of fewer than ``least`` points merged into the
     neighbour it shares the longest border with: the label most often among its points'
@@ -480,7 +481,9 @@ def merge_small(
     1. Smallest segment first; merged, it is counted again with its new neighbour.
     2. ``avoid[label]``: labels it joins only when it borders no other (a piece cut from a
        segment goes back into its one sibling only then: that would undo the cut, which
-       the next round would make again).
+       the next round would make again); ``prefer[label]``: labels it joins when it borders
+       one (a sliver of a cut into several pieces stays in its segment, so no neighbour's
+       border moves).
     3. A segment that borders none (an island) takes its points' nearest other labels.
 
     The input array itself when no segment is that small (or every one is).
@@ -508,6 +511,9 @@ def merge_small(
         shunned = np.isin(names, list((avoid or {}).get(label, ())))
         if not shunned.all():
             votes = np.where(shunned, 0, votes)
+        liked = np.isin(names, list((prefer or {}).get(label, ())))
+        if liked.any():
+            votes = np.where(liked, votes, 0)
         out[own] = names[int(np.argmax(votes))]
 
 

@@ -810,16 +810,16 @@ def _cut_rings(
 
 def _settle(
     points: NDArray[np.float64], labels: NDArray[np.int64], report: SplitReport,
-    avoid: dict[int, set[int]] | None = None,
+    avoid: dict[int, set[int]] | None = None, prefer: dict[int, set[int]] | None = None,
 ) -> NDArray[np.int64]:
     """The "too small" pass after every split step: each segment of fewer than
     ``MIN_PIECE_POINTS`` points (a sliver between a cut and a side, a ring's piece, a part
     a cut left) merged into the neighbour it shares the longest border with
-    (:func:`~pde2cad.layout.adjacency.merge_small`, ``avoid``: a piece of a cut in two and
-    its sibling). A cut that makes such a piece is no reason to refuse the layout: the
+    (:func:`~pde2cad.layout.adjacency.merge_small`; ``avoid``: the two pieces of a cut in
+    two, ``prefer``: the pieces of a cut into more, which keep their slivers). A cut that makes such a piece is no reason to refuse the layout: the
     piece is too small to be a patch, not too small for its neighbour's, and whatever
     corners the merge leaves are split in the next round. Merged labels leave ``report``."""
-    out = merge_small(points, labels, MIN_PIECE_POINTS, avoid)
+    out = merge_small(points, labels, MIN_PIECE_POINTS, avoid, prefer)
     if out is labels:
         return labels
     gone = set(np.unique(labels).tolist()) - set(np.unique(out).tolist())
@@ -912,7 +912,8 @@ def split_segments(
             continue
         start, out = out, out.copy()
         next_label = int(out.max()) + 1
-        cut: dict[int, set[int]] = {}
+        cut: dict[int, set[int]] = {}  # the other piece of a cut in two (avoided)
+        kin: dict[int, set[int]] = {}  # the other pieces of a cut into more (preferred)
         if not todo:
             halved = _halve_digon(points, out, layout, tree, corners, seg_corners)
             if halved is None:
@@ -940,8 +941,8 @@ def split_segments(
             )
             counts = np.bincount(which)
             names = [label] + list(range(next_label, next_label + len(counts) - 1))
-            if len(names) == 2:
-                cut.update({names[0]: {names[1]}, names[1]: {names[0]}})
+            for name in names:
+                (cut if len(names) == 2 else kin)[name] = set(names) - {name}
             next_label += len(counts) - 1
             out[members] = np.asarray(names)[which]
             pieces = report.pieces.setdefault(first, [first])
@@ -950,7 +951,7 @@ def split_segments(
             for name in names:
                 source[name] = first
         out, next_label = _separate(points, out, report, next_label, source)
-        out = _settle(points, out, report, cut)
+        out = _settle(points, out, report, cut, kin)
         if np.array_equal(out, start):
             break  # every cut undone by its pieces' merges: _check_pieces names the segment
         layout = _add_sharp_turns(points, out, relayout(out), tree)
