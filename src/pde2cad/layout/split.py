@@ -819,7 +819,14 @@ def _settle(
     two, ``prefer``: the pieces of a cut into more, which keep their slivers). A cut that makes such a piece is no reason to refuse the layout: the
     piece is too small to be a patch, not too small for its neighbour's, and whatever
     corners the merge leaves are split in the next round. Merged labels leave ``report``."""
-    out = merge_small(points, labels, MIN_PIECE_POINTS, avoid, prefer)
+    out = labels
+    for _ in range(MAX_ROUNDS):
+        merged = merge_small(points, out, MIN_PIECE_POINTS, avoid, prefer)
+        if merged is out:
+            break
+        # A piece's crumbs apart from it (under COMPONENT_SHARE of it) went with it and may
+        # lie apart from their new segment: they become pieces of their own, merged again.
+        out = separate_pieces(points, merged, int(merged.max()) + 1, min_points=1)[0]
     if out is labels:
         return labels
     gone = set(np.unique(labels).tolist()) - set(np.unique(out).tolist())
