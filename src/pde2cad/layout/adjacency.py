@@ -468,6 +468,55 @@ def take_nearest(points: NDArray[np.float64], labels: NDArray[np.int64], moving:
     return out
 
 
+def merge_small(
+    points: NDArray[np.float64], labels: NDArray[np.int64], least: int,
+    avoid: dict[int, set[int]] | None = None, prefer: dict[int, set[int]] | None = None,
+    k: int = 12,
+) -> NDArray[np.int64]:
+    """``labels`` with every segment of fewer than ``least`` points merged into the
+    neighbour it shares the longest border with: the label most often among its points'
+    ``k`` nearest neighbours within the neighbour radius (as :func:`build_layout` counts a
+    border).
+
+    1. Smallest segment first; merged, it is counted again with its new neighbour.
+    2. ``avoid[label]``: labels it joins only when it borders no other (a piece cut from a
+       segment goes back into its one sibling only then: that would undo the cut, which
+       the next round would make again); ``prefer[label]``: labels it joins when it borders
+       one (a sliver of a cut into several pieces stays in its segment, so no neighbour's
+       border moves).
+    3. A segment that borders none (an island) takes its points' nearest other labels.
+
+    The input array itself when no segment is that small (or every one is).
+    """
+    out = labels
+    present, counts = np.unique(labels, return_counts=True)
+    if not (counts < least).any() or (counts < least).all():
+        return labels
+    tree, _, radius = _neighbours(points, k)
+    kk = min(k + 1, len(points))
+    while True:
+        present, counts = np.unique(out, return_counts=True)
+        if not (counts < least).any() or len(present) < 2:
+            return out
+        label = int(present[np.argmin(counts)])
+        own = np.flatnonzero(out == label)
+        dist, idx = tree.query(points[own], k=kk, distance_upper_bound=radius, workers=-1)
+        near = out[idx[(idx < len(points))]]
+        near = near[near != label]
+        out = out.copy() if out is labels else out
+        if not len(near):
+            out[:] = take_nearest(points, out, out == label)
+            continue
+        names, votes = np.unique(near, return_counts=True)
+        shunned = np.isin(names, list((avoid or {}).get(label, ())))
+        if not shunned.all():
+            votes = np.where(shunned, 0, votes)
+        liked = np.isin(names, list((prefer or {}).get(label, ())))
+        if liked.any():
+            votes = np.where(liked, votes, 0)
+        out[own] = names[int(np.argmax(votes))]
+
+
 # --------------------------------------------------------------------------- on the surface
 def _local_graph(
     pts: NDArray[np.float64], tree: cKDTree, centres: NDArray[np.float64], reach: float,

@@ -33,8 +33,12 @@ between :func:`~pde2cad.layout.adjacency.build_layout` and
       angles deviate least from 90 (quads) or 60 (triangles) degrees; straight cuts in the
       PCA plane.
 
-A piece with fewer than ``MIN_PIECE_POINTS`` points, or a piece still not 3/4-sided after the
-rounds, raises an :class:`~pde2cad.errors.InputError` naming the input segment.
+After every step that cuts (rings, sectors, each round, the parts a cut leaves apart), a
+piece with fewer than ``MIN_PIECE_POINTS`` points merges into the neighbour it shares the
+longest border with (:func:`_settle`; not into the other half of a cut in two while it has
+another neighbour); the corners this moves are split in the next round. A piece still not
+3/4-sided after the rounds raises an :class:`~pde2cad.errors.InputError` naming the input
+segment.
 
 Before these steps, segments with two boundary loops (rings, tubes, a sheet with a hole) are
 cut by :func:`~pde2cad.layout.rings.split_rings`, and before every round the layout gets
@@ -60,12 +64,14 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
-from pde2cad.layout.adjacency import Layout, build_layout, separate_pieces, take_nearest
+from pde2cad.layout.adjacency import Layout, build_layout, merge_small, separate_pieces
 from pde2cad.layout.edges import filter_corners
 from pde2cad.layout.rings import boundary_loops, split_rings
 from pde2cad.surfaces.region import pca_frame
 
-#: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``).
+#: Fewest points of a piece of a split segment (as ``build_layout``'s ``min_points``, which
+#: refuses smaller segments: the pipeline fits an edge-curve band and a deformation per
+#: patch); smaller pieces join a neighbour (:func:`_settle`).
 MIN_PIECE_POINTS = 50
 #: Largest corner count split, and the largest split by trying every chord of every piece
 #: (larger ones are halved first; a crease-bounded face of a CAD part can have 15-30).
@@ -422,10 +428,9 @@ def _absorb_small(points: NDArray[np.float64], which: NDArray[np.int64], least: 
     """Pieces (``which``, 0 .. P-1) of fewer than ``least`` points given to the piece of
     their nearest point in a larger piece; renumbered 0 .. Q-1 (all 0 when no piece is
     that large)."""
-    small = np.bincount(which)[which] < least
-    if small.all():
+    if (np.bincount(which)[which] < least).all():
         return np.zeros_like(which)
-    out = take_nearest(points, which, small)
+    out = merge_small(points, which, least)
     return out if out is which else np.unique(out, return_inverse=True)[1].reshape(-1)
 
 
@@ -799,7 +804,35 @@ def _cut_rings(
         report.pieces[label] = names
         report.corners[label] = 0
         report.rings.append(label)
-    return _separate(points, out, report, max(int(out.max()) + 1, first_new))[0]
+    out = _separate(points, out, report, max(int(out.max()) + 1, first_new))[0]
+    return _settle(points, out, report)
+
+
+def _settle(
+    points: NDArray[np.float64], labels: NDArray[np.int64], report: SplitReport,
+    avoid: dict[int, set[int]] | None = None, prefer: dict[int, set[int]] | None = None,
+) -> NDArray[np.int64]:
+    """The "too small" pass after every split step: each segment of fewer than
+    ``MIN_PIECE_POINTS`` points (a sliver between a cut and a side, a ring's piece, a part
+    a cut left) merged into the neighbour it shares the longest border with
+    (:func:`~pde2cad.layout.adjacency.merge_small`; ``avoid``: the two pieces of a cut in
+    two, ``prefer``: the pieces of a cut into more, which keep their slivers). A cut that makes such a piece is no reason to refuse the layout: the
+    piece is too small to be a patch, not too small for its neighbour's, and whatever
+    corners the merge leaves are split in the next round. Merged labels leave ``report``."""
+    out = labels
+    for _ in range(MAX_ROUNDS):
+        merged = merge_small(points, out, MIN_PIECE_POINTS, avoid, prefer)
+        if merged is out:
+            break
+        # A piece's crumbs apart from it (under COMPONENT_SHARE of it) went with it and may
+        # lie apart from their new segment: they become pieces of their own, merged again.
+        out = separate_pieces(points, merged, int(merged.max()) + 1, min_points=1)[0]
+    if out is labels:
+        return labels
+    gone = set(np.unique(labels).tolist()) - set(np.unique(out).tolist())
+    for first, names in report.pieces.items():
+        names[:] = [n for n in names if n == first or n not in gone]
+    return out
 
 
 def _separate(
@@ -811,7 +844,8 @@ def _separate(
     segment in two parts (a ring cut where it pinches, a corner cut across a wavy border);
     each part of some size becomes a segment of its own, as the error would ask the user
     to do. Returns the labels and the next free label."""
-    out, apart = separate_pieces(points, labels, first_new)
+    # Parts of any size get a label: :func:`_settle` gives the small ones to a neighbour.
+    out, apart = separate_pieces(points, labels, first_new, min_points=1)
     for label, names in apart.items():
         owner = (source or {}).get(label, next((k for k, v in report.pieces.items() if label in v), label))
         report.pieces.setdefault(owner, [owner]).extend(names[1:])
@@ -851,8 +885,8 @@ def split_segments(
     Raises
     ------
     InputError
-        A piece of a split segment with fewer than ``MIN_PIECE_POINTS`` points, or a segment
-        with more than ``MAX_CORNERS`` corners (the message names the label).
+        A piece of a split segment still not 3/4-sided after the rounds, or a segment with
+        more than ``MAX_CORNERS`` corners (the message names the label).
     """
     report = SplitReport()
     relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency))
@@ -878,8 +912,15 @@ def split_segments(
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
         todo = _apart(layout, [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4])
-        out = out.copy()
+        thin = _merge_thin(out, layout, seg_corners, source)
+        if thin is not None:
+            out = thin
+            layout = _add_sharp_turns(points, out, relayout(out), tree)
+            continue
+        start, out = out, out.copy()
         next_label = int(out.max()) + 1
+        cut: dict[int, set[int]] = {}  # the other piece of a cut in two (avoided)
+        kin: dict[int, set[int]] = {}  # the other pieces of a cut into more (preferred)
         if not todo:
             halved = _halve_digon(points, out, layout, tree, corners, seg_corners)
             if halved is None:
@@ -906,19 +947,9 @@ def split_segments(
                 CORNER_REACH * layout.radius,
             )
             counts = np.bincount(which)
-            if counts.min() < MIN_PIECE_POINTS and len(counts) > 2:
-                # A sliver piece (a chord close to a side) joins the piece next to it; that
-                # piece's extra corners are split in the next round.
-                which = _absorb_small(points[members], which, MIN_PIECE_POINTS)
-                counts = np.bincount(which)
-            if counts.min() < MIN_PIECE_POINTS:
-                raise InputError(
-                    f"segment {first} has {len(ids)} corners and splitting it into 3/4-sided "
-                    f"pieces leaves one with {int(counts.min())} points (need "
-                    f"{MIN_PIECE_POINTS}); sample the surface more densely or split that "
-                    "segment by hand"
-                )
             names = [label] + list(range(next_label, next_label + len(counts) - 1))
+            for name in names:
+                (cut if len(names) == 2 else kin)[name] = set(names) - {name}
             next_label += len(counts) - 1
             out[members] = np.asarray(names)[which]
             pieces = report.pieces.setdefault(first, [first])
@@ -927,11 +958,41 @@ def split_segments(
             for name in names:
                 source[name] = first
         out, next_label = _separate(points, out, report, next_label, source)
+        out = _settle(points, out, report, cut, kin)
+        if np.array_equal(out, start):
+            break  # every cut undone by its pieces' merges: _check_pieces names the segment
         layout = _add_sharp_turns(points, out, relayout(out), tree)
     else:
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
     return out, layout, report
+
+
+def _merge_thin(
+    labels: NDArray[np.int64], layout: Layout, seg_corners: dict[int, list[int]],
+    source: dict[int, int],
+) -> NDArray[np.int64] | None:
+    """Labels with every piece of a split that has 1 or 2 corners (a cut that ran close to a
+    side leaves a strip too thin for the layout to tell its corners apart) merged into the
+    neighbour it shares the longest border with, as :func:`_merge_slivers` does before the
+    rounds; whatever corners that leaves are split in the next round. None when there is
+    none."""
+    into: dict[int, int] = {}
+    for label, ids in sorted(seg_corners.items()):
+        around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items()
+                  if label in (a, b) and into.get(b if a == label else a) != label}
+        if label in source and 0 < len(ids) < 3 and around:
+            into[label] = max(around, key=lambda k: around[k])
+    if not into:
+        return None
+    out = labels.copy()
+    for label, other in into.items():
+        seen = {label}
+        while other in into and other not in seen:  # a chain of thin pieces ends at a wide one
+            seen.add(other)
+            other = into[other]
+        out[labels == label] = other
+    return out
 
 
 def _apart(layout: Layout, todo: list[tuple[int, list[int]]]) -> list[tuple[int, list[int]]]:
