@@ -116,23 +116,3 @@ def test_noisy_ellipsoid_wavy_cube_faces(tmp_path: Path) -> None:
     m = _figures(rec, p, _ellipsoid_distance, tmp_path)
     assert m["n_faces"] == 6
     assert m["error"] <= 5e-4
-
-
-def test_kmeans_capsule_short_edge_does_not_fold(tmp_path: Path) -> None:
-    """Issue 13: on this k-means capsule a short edge was paired across its corner with one
-    three times longer; sharing one end derivative it started at three times its own speed,
-    turned 56 deg off its chord and the C0-fallback patch beside it folded (seam 179 deg read
-    back). Pairs of such unequal lengths are no longer made: no C0 fallback, every edge curve
-    runs forward along its chord, seams within a few degrees (2.05 measured; the odd-valence
-    ribbons part near corners, so 1 deg is not reached on k-means layouts, left open)."""
-    p, lab = _capsule(1, 8, False)
-    rec = reconstruct(p, lab, continuity="c1")
-    m = _figures(rec, p, _capsule_distance, tmp_path)
-    assert rec.network is not None
-    s = np.linspace(0.0, 1.0, 101)
-    for curve in rec.network.curves.values():
-        ends = curve.evaluate(np.array([0.0, 1.0]))
-        assert np.all(curve.derivative(s) @ (ends[1] - ends[0]) > 0)
-    assert rec.c0_fallback == []
-    assert m["max_angle_deg"] <= 3.0
-    assert m["error"] <= 1e-3

@@ -94,17 +94,6 @@ EXTRAPOLATION = 2.0
 QUADRIC_RADIUS = 3.0
 #: Edges through a corner are paired when their free fits turn by less than this (degrees).
 PAIR_ANGLE = 60.0
-#: ... and when one is at most this many times as long as the other (:func:`_data_length`).
-#: A pair shares one end derivative, between the two edges' own speeds (a curve on [0, 1]
-#: runs at about its length). A cubic of chord L leaving both ends along it at speed m runs
-#: backwards at its middle once m > 3 L (Hermite: x'(1/2) = 1.5 L - 0.5 m): the short edge of
-#: a pair 3-10x apart overshoots its far corner and folds back (k-means capsules: short
-#: edges turning 70-156 deg off their chord, seams folding 180 deg); 2 keeps a margin.
-#: Unpaired, the corner is irregular and its ribbons share only the part across each edge
-#: (:mod:`pde2cad.layout.ribbons`).
-PAIR_LENGTH_RATIO = 2.0
-#: Edge data points averaged per station of the edge's length (:func:`_data_length`).
-LENGTH_BIN = 8
 #: A corner is smooth when its segments' own local quadrics give normals at the corner within
 #: SMOOTH_ANGLE degrees, or when one quadric over all its segments' nearby points leaves an RMS
 #: residual below SMOOTH_RATIO x that of a quadric per segment (or below SMOOTH_FLOOR x the
@@ -318,18 +307,6 @@ def _edge_params(
         return t
     arc = d0 / np.maximum(d0 + d1, 1e-300)
     return arc if np.abs(arc - t).max() > FOLDED_EDGE else t
-
-
-def _data_length(
-    data: NDArray[np.float64], t: NDArray[np.float64], p0: NDArray[np.float64], p1: NDArray[np.float64]
-) -> float:
-    """Length of an edge: the polyline from ``p0`` through the means of its data in runs of
-    ``LENGTH_BIN`` points along their parameters ``t`` to ``p1`` (the means average the
-    band's width out; a free fit of a few points can loop and be many times longer)."""
-    order = np.argsort(t)
-    runs = np.array_split(order, max(1, len(order) // LENGTH_BIN))
-    path = np.vstack([p0, [data[r].mean(axis=0) for r in runs], p1])
-    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
 def _open_flags(layout: Layout, corners: NDArray[np.float64]) -> NDArray[np.bool_] | None:
@@ -687,7 +664,6 @@ def build_edges(
     at_corner: dict[int, list[tuple[Key, int]]] = {c: [] for c in range(len(corners))}
     spans: dict[Key, int] = {}
     params: dict[Key, NDArray[np.float64]] = {}
-    lengths: dict[Key, float] = {}
     ends: dict[tuple[Key, int], tuple[NDArray[np.float64], NDArray[np.float64], float]] = {}
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
@@ -706,7 +682,6 @@ def build_edges(
         pick = pick[np.linspace(0, len(pick) - 1, min(len(pick), SPAN_SAMPLE)).astype(np.int64)]
         n, _, _ = _choose_spans(pts_e[pick], t[pick])
         spans[key] = n
-        lengths[key] = _data_length(pts_e, t, p0, p1)
         length = float(np.linalg.norm(chord))
         for end in (0, 1):
             ends[(key, end)] = _end_line(
@@ -747,7 +722,7 @@ def build_edges(
             if sheets.angle(data[key][::step], sorted(who)) > CREASE_ANGLE:
                 creases.add(key)
                 smooth[key[0]] = smooth[key[1]] = False
-    pairs, regular = _pairs(loops, users, len(corners), away, smooth, lengths)
+    pairs, regular = _pairs(loops, users, len(corners), away, smooth)
     # At a crease corner the quadric over all segments rounds the corner off: put it on the
     # intersection of the segments' own surfaces instead (nearest point to the estimate).
     for c, incident in at_corner.items():
@@ -838,11 +813,10 @@ def _pairs(
     n_corners: int,
     away: dict[tuple[int, Key], NDArray[np.float64]],
     smooth: dict[int, bool],
-    lengths: dict[Key, float] | None = None,
 ) -> tuple[dict[int, list[tuple[Key, Key]]], dict[int, bool]]:
     """Edges paired across each corner: for a shared edge, the two patches' other edges,
     when the surface is smooth at the corner or they run on smoothly through it (a crease
-    keeps its kink), and their ``lengths`` differ by at most ``PAIR_LENGTH_RATIO``."""
+    keeps its kink)."""
     other: dict[tuple[int, int], dict[Key, Key]] = {}
     for label, ids in loops.items():
         c = len(ids)
@@ -868,12 +842,8 @@ def _pairs(
         for ea, eb in sorted(candidates):
             da, db = away[(corner, ea)], away[(corner, eb)]
             cos = -float(da @ db) / max(float(np.linalg.norm(da) * np.linalg.norm(db)), 1e-300)
-            # ... the paired edges run on smoothly (a crease keeps its kink) ...
-            turns = smooth.get(corner, False) or cos >= np.cos(np.radians(PAIR_ANGLE))
-            # ... at comparable speeds (one shared end derivative).
-            ratio = 1.0 if lengths is None else max(lengths[ea], lengths[eb]) / max(
-                min(lengths[ea], lengths[eb]), 1e-300)
-            if ok and turns and ratio <= PAIR_LENGTH_RATIO:
+            # ... and the paired edges run on smoothly (a crease keeps its kink).
+            if ok and (smooth.get(corner, False) or cos >= np.cos(np.radians(PAIR_ANGLE))):
                 pairs[corner].append((ea, eb))
         regular[corner] = ok and len(pairs[corner]) == len(candidates)
     return pairs, regular
