@@ -489,7 +489,7 @@ def merge_small(
     The input array itself when no segment is that small (or every one is).
     """
     out = labels
-    present, counts = np.unique(labels, return_counts=True)
+    counts = np.unique(labels, return_counts=True)[1]
     if not (counts < least).any() or (counts < least).all():
         return labels
     tree, _, radius = _neighbours(points, k)
@@ -500,7 +500,7 @@ def merge_small(
             return out
         label = int(present[np.argmin(counts)])
         own = np.flatnonzero(out == label)
-        dist, idx = tree.query(points[own], k=kk, distance_upper_bound=radius, workers=-1)
+        _, idx = tree.query(points[own], k=kk, distance_upper_bound=radius, workers=-1)
         near = out[idx[(idx < len(points))]]
         near = near[near != label]
         out = out.copy() if out is labels else out

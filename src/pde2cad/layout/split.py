@@ -816,8 +816,8 @@ def _settle(
     ``MIN_PIECE_POINTS`` points (a sliver between a cut and a side, a ring's piece, a part
     a cut left) merged into the neighbour it shares the longest border with
     (:func:`~pde2cad.layout.adjacency.merge_small`; ``avoid``: the two pieces of a cut in
-    two, ``prefer``: the pieces of a cut into more, which keep their slivers). A cut that makes such a piece is no reason to refuse the layout: the
-    piece is too small to be a patch, not too small for its neighbour's, and whatever
+    two, ``prefer``: the pieces of a cut into more, which keep their slivers). A cut that
+    makes such a piece is no reason to refuse the layout: the piece is too small to be a patch, not too small for its neighbour's, and whatever
     corners the merge leaves are split in the next round. Merged labels leave ``report``."""
     out = labels
     for _ in range(MAX_ROUNDS):
