@@ -41,6 +41,11 @@ MINIMAX_RANGE = 1.4
 # spread of lengths relative to the previous piece's.
 _ROUND = 3
 _SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
+# A bracket with at most this many stops left is fitted whole in one batch: the rounds of
+# _ROUND stops that would close it (two or three sequential batches, each with its own
+# minimax refits) then find their fits in the cache. More rows cost little next to the
+# fixed cost of a batch while the rows stay few.
+_EXHAUST = 8
 # The break-point search tries these parameterizations (the two that win most often on
 # pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
 _SEARCH_METHODS = ("chord", "uniform")
@@ -397,7 +402,8 @@ def fit_chain(
         When a G1 piece cannot meet the tolerance, refit the chain with C0 joins (default).
         Callers that have a plan B of their own (symmetric fits) switch it off.
     max_pieces : int, optional
-        Give up (returning ``ok=False``) once more pieces than this are needed.
+        Give up (returning ``ok=False``, its pieces not refined) once more than this many
+        pieces, plus one that reaches the end, are needed.
     deadline : float, optional
         Raise :class:`DeadlineExceeded` once ``time.perf_counter()`` passes it.
     edge_midpoints : bool
@@ -464,9 +470,18 @@ def fit_chain(
     p0 = first_p
     spans: list[tuple[Any, ...]] = []
     oks: list[bool] = []
+    gave_up = False
     while start < end:
         if deadline is not None and time.perf_counter() > deadline:
             raise DeadlineExceeded("the fit ran past its deadline")
+        if max_pieces is not None and len(pieces) >= max_pieces:
+            # The last piece allowed must reach the end: only the whole rest is tested (the
+            # search would reach the end just when the whole rest passes).
+            fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
+            if not ok:
+                pieces.append(fit)
+                gave_up = True
+                break
         stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess, (last_p, final_tan))
         if stop < end and prefer_breaks is not None and not prefer_breaks[stop]:
             stop, fit, ok = _snap_to_kink(fitter, start, stop, fit, ok, p0, tan, joins, prefer_breaks)
@@ -485,9 +500,6 @@ def fit_chain(
         spans.append((start, stop, p0, p3, tan, t3))
         oks.append(ok)
         pieces.append(fit)
-        if max_pieces is not None and len(pieces) > max_pieces and stop < end:
-            oks.append(False)
-            break
         breaks.append(stop)
         guess = max(stop - start, MIN_POINTS)
         if stop < end and jtan is None:
@@ -495,9 +507,9 @@ def fit_chain(
         tan = t3 if stop < end else None
         p0 = p3
         start = stop
-    if len(fitter.all_names) > len(fitter.names):
+    if len(fitter.all_names) > len(fitter.names) and not gave_up:
         pieces, oks[: len(spans)] = _refit_all_names(fitter, spans, pieces, oks[: len(spans)])
-    all_ok = all(oks)
+    all_ok = all(oks) and not gave_up
     curves = np.stack([f.ctrl for f in pieces]) if pieces else np.zeros((0, 4, pts.shape[1]))
     chain = ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners, all_ok)
     if not all_ok and g1 and c0_fallback:
@@ -750,7 +762,11 @@ def _longest_prefix(
         return end, fit, good
     hi = end
     lo_fit: CubicFit | None = None
+    exhausted = False
     while cands.size:
+        if first is None and not exhausted and cands.size < hi - lo - 1 <= _EXHAUST:
+            exhausted = True
+            test(np.arange(lo if lo_fit is None else lo + 1, hi))  # into the cache
         results = test(cands) if first is None else first
         first = None
         passing = [(c, f) for c, (f, good) in zip(cands.tolist(), results) if good]
