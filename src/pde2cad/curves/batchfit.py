@@ -27,7 +27,8 @@ class Batch:
     p0, p3 : (B, D) float
         Fixed end points.
     tan0, tan3 : (B, D) float or None
-        Unit end tangents (G1 constraints), the same presence for the whole batch.
+        Unit end tangents (G1 constraints); None frees that end of every problem, a row of
+        NaN frees it for that problem only (problems of every kind share one batch).
     """
 
     points: NDArray[np.float64]
@@ -66,8 +67,44 @@ def _unit_clip(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.minimum(np.maximum(x, 0.0), 1.0)
 
 
+def _free_rows(tan: NDArray[np.float64] | None) -> NDArray[np.bool_] | None:
+    """Rows of a tangent array that leave their end free (NaN); None when there are none."""
+    if tan is None:
+        return None
+    free = np.isnan(tan[:, 0])
+    return free if free.any() else None
+
+
+def _mixed_basis(batch: Batch):
+    """:func:`_basis` for a batch mixing free and tangent-constrained ends.
+
+    Each end takes the columns of a free end (D of them); a constrained end uses the first
+    only and leaves the others zero, so their unknowns stay 0 (minimum-norm first solve,
+    zero gradient in the damped steps)."""
+    p0, p3 = batch.p0, batch.p3
+    bsz, dim = p0.shape
+    chord = p3 - p0
+    prior = np.maximum(_norm(chord)[:, None] / 3.0, 1e-9)
+    free0 = np.ones(bsz, bool) if batch.tan0 is None else np.isnan(batch.tan0[:, 0])
+    free3 = np.ones(bsz, bool) if batch.tan3 is None else np.isnan(batch.tan3[:, 0])
+    tan0 = np.zeros_like(p0) if batch.tan0 is None else np.where(free0[:, None], 0.0, batch.tan0)
+    tan3 = np.zeros_like(p3) if batch.tan3 is None else np.where(free3[:, None], 0.0, batch.tan3)
+    lin1 = np.zeros((bsz, dim, 2 * dim))
+    lin2 = np.zeros((bsz, dim, 2 * dim))
+    eye = np.eye(dim)
+    lin1[free0, :, :dim] = eye
+    lin1[~free0, :, 0] = tan0[~free0]
+    lin2[free3, :, dim:] = eye
+    lin2[~free3, :, dim] = -tan3[~free3]
+    base1 = np.where(free0[:, None], p0 + chord / 3.0, p0 + prior * tan0)
+    base2 = np.where(free3[:, None], p3 - chord / 3.0, p3 - prior * tan3)
+    return base1, base2, lin1, lin2
+
+
 def _basis(batch: Batch):
     """Batched :func:`pde2cad.curves.fit._constraint_basis`: ``p1 = base1 + lin1 @ x``."""
+    if _free_rows(batch.tan0) is not None or _free_rows(batch.tan3) is not None:
+        return _mixed_basis(batch)
     p0, p3, tan0, tan3 = batch.p0, batch.p3, batch.tan0, batch.tan3
     bsz, dim = p0.shape
     chord = p3 - p0
@@ -239,10 +276,14 @@ def _clamped(batch: Batch, t, valid, p1, p2):
             p1 = np.where(bad[:, None], p0 + floor[:, None] * tan0, p1)
             res = -(a[..., None] * p1[:, None] + b[..., None] * p2[:, None] + c) * valid[..., None]
             den = np.maximum(_dot(b, b), 1e-300)
+            free_shift = (b[:, None, :] @ res)[:, 0] / den[:, None]
             if tan3 is None:
-                shift = (b[:, None, :] @ res)[:, 0] / den[:, None]
+                shift = free_shift
             else:
                 shift = -tan3 * (_dot((b[:, None, :] @ res)[:, 0], -tan3) / den)[:, None]
+                free3 = _free_rows(tan3)
+                if free3 is not None:
+                    shift = np.where(free3[:, None], free_shift, shift)
             p2 = np.where(bad[:, None], p2 + shift, p2)
     if tan3 is not None:
         bad = _dot(p3 - p2, tan3) < floor
