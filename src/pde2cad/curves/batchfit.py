@@ -27,7 +27,8 @@ class Batch:
     p0, p3 : (B, D) float
         Fixed end points.
     tan0, tan3 : (B, D) float or None
-        Unit end tangents (G1 constraints), the same presence for the whole batch.
+        Unit end tangents (G1 constraints); None frees that end of every problem, a row of
+        NaN frees it for that problem only (problems of every kind share one batch).
     """
 
     points: NDArray[np.float64]
@@ -51,6 +52,11 @@ def _dot(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
     return _ADD(x * y, axis=-1)
 
 
+def _norm(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.linalg.norm(x, axis=-1)``, the same numbers without its Python wrapper."""
+    return np.sqrt(_dot(x, x))
+
+
 # The ufunc reductions themselves: ``ndarray.sum`` and ``np.clip`` pass through Python
 # wrappers that cost as much as the arithmetic on these small arrays.
 _ADD = np.add.reduce
@@ -61,12 +67,48 @@ def _unit_clip(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.minimum(np.maximum(x, 0.0), 1.0)
 
 
+def _free_rows(tan: NDArray[np.float64] | None) -> NDArray[np.bool_] | None:
+    """Rows of a tangent array that leave their end free (NaN); None when there are none."""
+    if tan is None:
+        return None
+    free = np.isnan(tan[:, 0])
+    return free if free.any() else None
+
+
+def _mixed_basis(batch: Batch):
+    """:func:`_basis` for a batch mixing free and tangent-constrained ends.
+
+    Each end takes the columns of a free end (D of them); a constrained end uses the first
+    only and leaves the others zero, so their unknowns stay 0 (minimum-norm first solve,
+    zero gradient in the damped steps)."""
+    p0, p3 = batch.p0, batch.p3
+    bsz, dim = p0.shape
+    chord = p3 - p0
+    prior = np.maximum(_norm(chord)[:, None] / 3.0, 1e-9)
+    free0 = np.ones(bsz, bool) if batch.tan0 is None else np.isnan(batch.tan0[:, 0])
+    free3 = np.ones(bsz, bool) if batch.tan3 is None else np.isnan(batch.tan3[:, 0])
+    tan0 = np.zeros_like(p0) if batch.tan0 is None else np.where(free0[:, None], 0.0, batch.tan0)
+    tan3 = np.zeros_like(p3) if batch.tan3 is None else np.where(free3[:, None], 0.0, batch.tan3)
+    lin1 = np.zeros((bsz, dim, 2 * dim))
+    lin2 = np.zeros((bsz, dim, 2 * dim))
+    eye = np.eye(dim)
+    lin1[free0, :, :dim] = eye
+    lin1[~free0, :, 0] = tan0[~free0]
+    lin2[free3, :, dim:] = eye
+    lin2[~free3, :, dim] = -tan3[~free3]
+    base1 = np.where(free0[:, None], p0 + chord / 3.0, p0 + prior * tan0)
+    base2 = np.where(free3[:, None], p3 - chord / 3.0, p3 - prior * tan3)
+    return base1, base2, lin1, lin2
+
+
 def _basis(batch: Batch):
     """Batched :func:`pde2cad.curves.fit._constraint_basis`: ``p1 = base1 + lin1 @ x``."""
+    if _free_rows(batch.tan0) is not None or _free_rows(batch.tan3) is not None:
+        return _mixed_basis(batch)
     p0, p3, tan0, tan3 = batch.p0, batch.p3, batch.tan0, batch.tan3
     bsz, dim = p0.shape
     chord = p3 - p0
-    prior = np.maximum(np.linalg.norm(chord, axis=1, keepdims=True) / 3.0, 1e-9)
+    prior = np.maximum(_norm(chord)[:, None] / 3.0, 1e-9)
     eye = np.broadcast_to(np.eye(dim), (bsz, dim, dim))
     zero_dd = np.zeros((bsz, dim, dim))
     zero_d1 = np.zeros((bsz, dim, 1))
@@ -203,7 +245,7 @@ def fit_batch(
     p1, p2 = _clamped(batch, t, valid, *inner(x))
     ctrl = np.stack([p0, p1, p2, p3], axis=1)
     t = _newton(ctrl, pts, t)
-    errors = np.where(valid, np.linalg.norm(_evaluate(ctrl, t) - pts, axis=2), 0.0)
+    errors = np.where(valid, _norm(_evaluate(ctrl, t) - pts), 0.0)
     return ctrl, t, errors
 
 
@@ -224,7 +266,7 @@ def _clamped(batch: Batch, t, valid, p1, p2):
     """Batched :func:`pde2cad.curves.fit._clamped`: a G1 length <= 0 is a cusp; clamp it and
     refit the other inner point alone."""
     p0, p3, tan0, tan3 = batch.p0, batch.p3, batch.tan0, batch.tan3
-    floor = 1e-3 * np.maximum(np.linalg.norm(p3 - p0, axis=1) / 3.0, 1e-9)
+    floor = 1e-3 * np.maximum(_norm(p3 - p0) / 3.0, 1e-9)
     if tan0 is not None:
         bad = _dot(p1 - p0, tan0) < floor
         if bad.any():
@@ -234,10 +276,14 @@ def _clamped(batch: Batch, t, valid, p1, p2):
             p1 = np.where(bad[:, None], p0 + floor[:, None] * tan0, p1)
             res = -(a[..., None] * p1[:, None] + b[..., None] * p2[:, None] + c) * valid[..., None]
             den = np.maximum(_dot(b, b), 1e-300)
+            free_shift = (b[:, None, :] @ res)[:, 0] / den[:, None]
             if tan3 is None:
-                shift = (b[:, None, :] @ res)[:, 0] / den[:, None]
+                shift = free_shift
             else:
                 shift = -tan3 * (_dot((b[:, None, :] @ res)[:, 0], -tan3) / den)[:, None]
+                free3 = _free_rows(tan3)
+                if free3 is not None:
+                    shift = np.where(free3[:, None], free_shift, shift)
             p2 = np.where(bad[:, None], p2 + shift, p2)
     if tan3 is not None:
         bad = _dot(p3 - p2, tan3) < floor
@@ -247,7 +293,12 @@ def _clamped(batch: Batch, t, valid, p1, p2):
 
 def _bernstein(t: NDArray[np.float64]) -> NDArray[np.float64]:
     s = 1.0 - t
-    return np.stack([s**3, 3.0 * t * s * s, 3.0 * t * t * s, t**3], axis=-1)
+    out = np.empty(t.shape + (4,))  # filled in place: np.stack costs more than the arithmetic
+    out[..., 0] = s**3
+    out[..., 1] = 3.0 * t * s * s
+    out[..., 2] = 3.0 * t * t * s
+    out[..., 3] = t**3
+    return out
 
 
 def _evaluate(ctrl: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -258,10 +309,16 @@ def _evaluate(ctrl: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.f
 def _newton(ctrl, pts, t):
     """One Newton step of every parameter towards the closest curve point (Schneider 1990)."""
     s = 1.0 - t
-    d1c, d2c = 3.0 * np.diff(ctrl, axis=1), 6.0 * np.diff(ctrl, n=2, axis=1)
+    d1c = ctrl[:, 1:] - ctrl[:, :-1]
+    d2c = 6.0 * (d1c[:, 1:] - d1c[:, :-1])
+    d1c = 3.0 * d1c
     diff = _evaluate(ctrl, t) - pts
-    d1 = np.stack([s * s, 2 * t * s, t * t], -1) @ d1c
-    d2 = np.stack([s, t], -1) @ d2c
+    b1 = np.empty(t.shape + (3,))
+    b1[..., 0], b1[..., 1], b1[..., 2] = s * s, 2 * t * s, t * t
+    b2 = np.empty(t.shape + (2,))
+    b2[..., 0], b2[..., 1] = s, t
+    d1 = b1 @ d1c
+    d2 = b2 @ d2c
     num = _dot(diff, d1)
     den = _dot(d1, d1) + _dot(diff, d2)
     step = np.divide(num, den, out=np.zeros_like(num), where=np.abs(den) > 1e-12)
@@ -312,7 +369,7 @@ def midpoint_errors(ctrl: NDArray[np.float64], batch: Batch, t: NDArray[np.float
     for _ in range(3):
         tm = _newton(ctrl, mid, tm)
     pair = batch.valid[:, 1:]
-    return np.where(pair, np.linalg.norm(_evaluate(ctrl, tm) - mid, axis=2), 0.0).max(axis=1)
+    return np.where(pair, _norm(_evaluate(ctrl, tm) - mid), 0.0).max(axis=1)
 
 
 def curve_to_polyline_batch(
@@ -371,7 +428,7 @@ def parameters(name: str, points: NDArray[np.float64], lengths: NDArray[np.int64
     """
     bsz, n, _ = points.shape
     v = np.diff(points, axis=1)
-    d = np.linalg.norm(v, axis=2)
+    d = _norm(v)
     if name == "uniform":
         return np.minimum(np.arange(n)[None, :] / np.maximum(lengths - 1, 1)[:, None], 1.0)
     if name == "chord":

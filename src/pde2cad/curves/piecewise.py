@@ -41,6 +41,11 @@ MINIMAX_RANGE = 1.4
 # spread of lengths relative to the previous piece's.
 _ROUND = 3
 _SPREAD = np.array([0.6, 1.0, 1.5, 2.5])
+# A bracket with at most this many stops left is fitted whole in one batch: the rounds of
+# _ROUND stops that would close it (two or three sequential batches, each with its own
+# minimax refits) then find their fits in the cache. More rows cost little next to the
+# fixed cost of a batch while the rows stay few.
+_EXHAUST = 8
 # The break-point search tries these parameterizations (the two that win most often on
 # pixel boundaries and smooth samples); the chosen piece is then refitted with all of them.
 _SEARCH_METHODS = ("chord", "uniform")
@@ -169,7 +174,8 @@ class _Fitter:
         p0s, p3s : (m, D) float
             End points of each candidate.
         tan0s, tan3s : (m, D) float or None
-            End tangents of each candidate (None: free at that end, for all candidates).
+            End tangents of each candidate (None: free at that end, for all candidates; a
+            row of NaN: free for that candidate).
         """
         names = self.names if names is None else names
         starts = np.asarray(starts, dtype=np.int64)
@@ -213,17 +219,27 @@ class _Fitter:
         """One digest per span of everything its fit depends on: the span's points and
         parameter points, its end points and tangents, and the fitter's settings."""
         head = repr((self.tol, self.rounds, self.midpoints, tuple(names))).encode()
-        ends = [np.asarray(v, dtype=float).reshape(len(stops), -1) for v in (p0s, p3s, tan0s, tan3s) if v is not None]
+        m = len(stops)
+        ends = [np.asarray(v, dtype=float).reshape(m, -1) for v in (p0s, p3s, tan0s, tan3s) if v is not None]
         ends_bytes = np.ascontiguousarray(np.concatenate(ends, axis=1)) if ends else None
-        flags = f"{tan0s is None}{tan3s is None}".encode()
+        # Per row: which ends are free (None, or a NaN row), and the tangents of the others
+        # only, so a row keys alike whether it was fitted alone or in a mixed batch.
+        free0 = np.ones(m, bool) if tan0s is None else np.isnan(np.asarray(tan0s, dtype=float).reshape(m, -1)[:, 0])
+        free3 = np.ones(m, bool) if tan3s is None else np.isnan(np.asarray(tan3s, dtype=float).reshape(m, -1)[:, 0])
+        dim = self.points.shape[1]
         keys = []
         for j, (a, b) in enumerate(zip(starts.tolist(), stops.tolist())):
             h = hashlib.blake2b(head, digest_size=16)
-            h.update(flags)
+            h.update(f"{bool(free0[j])}{bool(free3[j])}".encode())
             h.update(self.points[a : b + 1].tobytes())
             h.update(self.param_points[a : b + 1].tobytes())
             if ends_bytes is not None:
-                h.update(ends_bytes[j].tobytes())
+                row = ends_bytes[j]
+                if tan0s is not None and free0[j]:
+                    row = np.r_[row[: 2 * dim], row[3 * dim :]]
+                if tan3s is not None and free3[j]:
+                    row = row[:-dim]
+                h.update(np.ascontiguousarray(row).tobytes())
             keys.append(h.digest())
         return keys
 
@@ -240,8 +256,8 @@ class _Fitter:
         t = np.concatenate([batchfit.parameters(name, ppts, lengths) for name in names])
         batch = batchfit.Batch(
             pts, valid, np.tile(np.asarray(p0s, dtype=float), (nm, 1)), np.tile(np.asarray(p3s, dtype=float), (nm, 1)),
-            None if tan0s is None else np.tile(_unit_rows(tan0s), (nm, 1)),
-            None if tan3s is None else np.tile(_unit_rows(tan3s), (nm, 1)),
+            None if tan0s is None else np.tile(_unit_or_free(tan0s), (nm, 1)),
+            None if tan3s is None else np.tile(_unit_or_free(tan3s), (nm, 1)),
         )
         ctrl, t, errors = batchfit.fit_batch(batch, t, self.rounds)
         worst = errors.max(axis=1)
@@ -327,6 +343,21 @@ def _unit_rows(v: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.divide(v, n, out=np.zeros_like(v), where=n > 1e-12)
 
 
+def _unit_or_free(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`_unit_rows`, rows of NaN (free ends) kept NaN."""
+    u = _unit_rows(v)
+    u[np.isnan(np.asarray(v, dtype=float)[:, 0])] = np.nan
+    return u
+
+
+def _ends(rows: list[Any], dim: int) -> NDArray[np.float64] | None:
+    """Per-piece end tangents (None: free) as one array with NaN rows for the free ends,
+    or None when every end is free."""
+    if all(r is None for r in rows):
+        return None
+    return np.stack([np.full(dim, np.nan) if r is None else np.asarray(r, dtype=float) for r in rows])
+
+
 def _take(batch: batchfit.Batch, rows: NDArray[np.bool_]) -> batchfit.Batch:
     return batchfit.Batch(
         batch.points[rows], batch.valid[rows], batch.p0[rows], batch.p3[rows],
@@ -397,7 +428,8 @@ def fit_chain(
         When a G1 piece cannot meet the tolerance, refit the chain with C0 joins (default).
         Callers that have a plan B of their own (symmetric fits) switch it off.
     max_pieces : int, optional
-        Give up (returning ``ok=False``) once more pieces than this are needed.
+        Give up (returning ``ok=False``, its pieces not refined) once more than this many
+        pieces, plus one that reaches the end, are needed.
     deadline : float, optional
         Raise :class:`DeadlineExceeded` once ``time.perf_counter()`` passes it.
     edge_midpoints : bool
@@ -464,9 +496,18 @@ def fit_chain(
     p0 = first_p
     spans: list[tuple[Any, ...]] = []
     oks: list[bool] = []
+    gave_up = False
     while start < end:
         if deadline is not None and time.perf_counter() > deadline:
             raise DeadlineExceeded("the fit ran past its deadline")
+        if max_pieces is not None and len(pieces) >= max_pieces:
+            # The last piece allowed must reach the end: only the whole rest is tested (the
+            # search would reach the end just when the whole rest passes).
+            fit, ok = _test(fitter, start, [end], p0, tan, last_p[None], None if final_tan is None else final_tan[None])[0]
+            if not ok:
+                pieces.append(fit)
+                gave_up = True
+                break
         stop, fit, ok = _longest_prefix(fitter, start, end, p0, tan, joins, jtan, guess, (last_p, final_tan))
         if stop < end and prefer_breaks is not None and not prefer_breaks[stop]:
             stop, fit, ok = _snap_to_kink(fitter, start, stop, fit, ok, p0, tan, joins, prefer_breaks)
@@ -485,9 +526,6 @@ def fit_chain(
         spans.append((start, stop, p0, p3, tan, t3))
         oks.append(ok)
         pieces.append(fit)
-        if max_pieces is not None and len(pieces) > max_pieces and stop < end:
-            oks.append(False)
-            break
         breaks.append(stop)
         guess = max(stop - start, MIN_POINTS)
         if stop < end and jtan is None:
@@ -495,9 +533,9 @@ def fit_chain(
         tan = t3 if stop < end else None
         p0 = p3
         start = stop
-    if len(fitter.all_names) > len(fitter.names):
+    if len(fitter.all_names) > len(fitter.names) and not gave_up:
         pieces, oks[: len(spans)] = _refit_all_names(fitter, spans, pieces, oks[: len(spans)])
-    all_ok = all(oks)
+    all_ok = all(oks) and not gave_up
     curves = np.stack([f.ctrl for f in pieces]) if pieces else np.zeros((0, 4, pts.shape[1]))
     chain = ChainFit(curves, pieces, np.asarray(breaks, dtype=np.int64), corners, all_ok)
     if not all_ok and g1 and c0_fallback:
@@ -519,25 +557,18 @@ def _refit_all_names(
     least as good (passing first, then the least maximum error).
 
     ``spans`` holds each piece's (start, stop, p0, p3, tan0, tan3); the pieces are refitted
-    together, one batch per kind of end constraint, after the break search has placed them
+    together, in one batch, after the break search has placed them
     all (the search does not depend on the refits)."""
     fits, oks = list(fits), list(oks)
     dim = fitter.points.shape[1]
-    for has0 in (False, True):
-        for has3 in (False, True):
-            sel = [i for i, sp in enumerate(spans) if (sp[4] is not None) == has0 and (sp[5] is not None) == has3]
-            if not sel:
-                continue
-            rows = [spans[i] for i in sel]
-            res = fitter.fit_spans(
-                np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                np.stack([r[2] for r in rows]).reshape(-1, dim), np.stack([r[3] for r in rows]).reshape(-1, dim),
-                np.stack([r[4] for r in rows]).reshape(-1, dim) if has0 else None,
-                np.stack([r[5] for r in rows]).reshape(-1, dim) if has3 else None, fitter.all_names,
-            )
-            for i, (best, best_ok) in zip(sel, res):
-                if (best_ok, -best.max_error) >= (oks[i], -fits[i].max_error):
-                    fits[i], oks[i] = best, best_ok
+    res = fitter.fit_spans(
+        np.array([r[0] for r in spans]), np.array([r[1] for r in spans]),
+        np.stack([r[2] for r in spans]).reshape(-1, dim), np.stack([r[3] for r in spans]).reshape(-1, dim),
+        _ends([r[4] for r in spans], dim), _ends([r[5] for r in spans], dim), fitter.all_names,
+    )
+    for i, (best, best_ok) in enumerate(res):
+        if (best_ok, -best.max_error) >= (oks[i], -fits[i].max_error):
+            fits[i], oks[i] = best, best_ok
     return fits, oks
 
 
@@ -617,8 +648,14 @@ def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start,
     m = len(_BLENDS)
     cand = _unit_rows(((1.0 - _BLENDS)[None, :, None] * a[joins - 1, None] + _BLENDS[None, :, None] * b[joins - 1, None]).reshape(-1, a.shape[1]))
     rep = np.repeat(joins, m)
-    left = _fit_pieces(fitter, c0, theta, rep - 1, None, cand, tan_start, tan_end)
-    right = _fit_pieces(fitter, c0, theta, rep, cand, None, tan_start, tan_end)
+    # Both sides of every join in one batch: the left pieces end on the candidate, the
+    # right ones start on it.
+    k = len(c0.fits)
+    dim = a.shape[1]
+    theta0 = [tan_start if j == 0 else theta[j - 1] for j in rep - 1] + list(cand)
+    theta3 = list(cand) + [tan_end if j == k - 1 else theta[j] for j in rep]
+    both = _fit_pieces(fitter, c0, theta, np.r_[rep - 1, rep], theta0, theta3, tan_start, tan_end)
+    left, right = both[: len(rep)], both[len(rep) :]
     err = np.array([max(fl.max_error, fr.max_error) for (fl, _), (fr, _) in zip(left, right)])
     good = np.array([gl and gr for (_, gl), (_, gr) in zip(left, right)])
     err = np.where(good & (np.linalg.norm(cand, axis=1) > 0.5), err, np.inf).reshape(-1, m)
@@ -632,7 +669,7 @@ def _best_tangents(fitter: _Fitter, c0: ChainFit, theta, joins, a, b, tan_start,
 def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan, tan_start, tan_end, names=None):
     """Fit C0 chain pieces at their break points with join tangents ``theta`` (joins 1..k-1)
     or the overrides ``start_tan`` / ``end_tan`` (one row per piece); chain ends keep
-    ``tan_start`` / ``tan_end`` (None: free). Batched per kind of end constraint."""
+    ``tan_start`` / ``tan_end`` (None: free). One batch for every kind of end constraint."""
     k = len(c0.fits)
     dim = c0.curves.shape[2]
     t0 = [None if j == 0 and tan_start is None else (np.asarray(tan_start, float) if j == 0 else theta[j - 1]) for j in pieces]
@@ -641,23 +678,10 @@ def _fit_pieces(fitter: _Fitter, c0: ChainFit, theta, pieces, start_tan, end_tan
         t0 = list(start_tan)
     if end_tan is not None:
         t3 = list(end_tan)
-    t0 = [None if v is None or np.isnan(v[0]) else v for v in t0]  # NaN: a C0 join, free
-    t3 = [None if v is None or np.isnan(v[0]) else v for v in t3]
-    out: list[tuple[CubicFit, bool] | None] = [None] * len(pieces)
-    for has0 in (False, True):
-        for has3 in (False, True):
-            sel = [i for i in range(len(pieces)) if (t0[i] is not None) == has0 and (t3[i] is not None) == has3]
-            if not sel:
-                continue
-            js = np.asarray(pieces)[sel]
-            res = fitter.fit_spans(
-                c0.breaks[js], c0.breaks[js + 1], c0.curves[js, 0], c0.curves[js, 3],
-                np.stack([np.asarray(t0[i]) for i in sel]).reshape(-1, dim) if has0 else None,
-                np.stack([np.asarray(t3[i]) for i in sel]).reshape(-1, dim) if has3 else None, names,
-            )
-            for i, r in zip(sel, res):
-                out[i] = r
-    return out
+    js = np.asarray(pieces, dtype=np.int64)
+    # NaN rows: a C0 join, free; all kinds of end constraint in one batch.
+    return fitter.fit_spans(c0.breaks[js], c0.breaks[js + 1], c0.curves[js, 0], c0.curves[js, 3],
+                            _ends(t0, dim), _ends(t3, dim), names)
 
 
 def _split_at_corners(pts: NDArray[np.float64], tolerance: float, cuts: NDArray[np.int64], kw: dict[str, Any]) -> ChainFit:
@@ -750,7 +774,11 @@ def _longest_prefix(
         return end, fit, good
     hi = end
     lo_fit: CubicFit | None = None
+    exhausted = False
     while cands.size:
+        if first is None and not exhausted and cands.size < hi - lo - 1 <= _EXHAUST:
+            exhausted = True
+            test(np.arange(lo if lo_fit is None else lo + 1, hi))  # into the cache
         results = test(cands) if first is None else first
         first = None
         passing = [(c, f) for c, (f, good) in zip(cands.tolist(), results) if good]
