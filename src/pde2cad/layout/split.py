@@ -60,7 +60,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
@@ -401,8 +401,19 @@ def _split_one(
     points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
 ) -> NDArray[np.int64]:
     """Piece index (0, 1, ...) of each of a segment's ``points``, given its boundary ``loop``
-    and corners ``xyz`` in loop order: cuts from reflex corners first, then strip cuts for
-    a quad with T-nodes, chords otherwise."""
+    and corners ``xyz`` in loop order.
+
+    1. Cuts from reflex corners (:func:`_reflex_cells`) when there are any; else, for a quad
+       with T-nodes, strip cuts (:func:`_strip_cells`).
+    2. Those cuts are kept when no cell is a crumb (:func:`_has_crumbs`). A curved
+       strip with many neighbours' corners on both sides (a fillet of a CAD part between
+       creases: 10-16 corners, most near straight) crosses them into a grid whose cells
+       between nearby cuts are crumbs, too small for a patch: merged into a neighbour they
+       make it no 3/4-sided region, or one that pinches. Then one cut across its narrowest
+       neck (:func:`_neck_cut`); the next round cuts the parts on.
+    3. Otherwise (or no neck found) chords between the corners (:func:`best_split`),
+       straight lines in the PCA plane.
+    """
     directions, angle = _corner_angles(points, loop, xyz, reach)
     flat = np.flatnonzero((angle >= FLAT_ANGLE) & (angle <= REFLEX_ANGLE))
     reflex = np.flatnonzero(angle > REFLEX_ANGLE)
@@ -411,17 +422,108 @@ def _split_one(
         # All but 4 corners straight or wider: a quad with T-nodes, whatever the widest
         # read (two cube-sphere faces merged: 240 where the neighbours have a corner).
         flat, reflex = widest, widest[:0]
+    cell = None
     if len(reflex):
         cell = _reflex_cells(points, xyz, directions, reflex)
-        if len(np.unique(cell)) > 1:
-            return np.unique(cell, return_inverse=True)[1].reshape(-1)
-    if len(xyz) - len(flat) == 4:
+        cell = cell if len(np.unique(cell)) > 1 else None
+    if cell is None and len(xyz) - len(flat) == 4:
         cell = _strip_cells(points, loop, xyz, np.setdiff1d(np.arange(len(xyz)), flat), flat)
-    else:
+    if cell is not None and _has_crumbs(points, loop, cell, reach):
+        cell = _neck_cut(points, loop, xyz, reach)
+    if cell is None:
         origin, axes = pca_frame(points)
         poly = (xyz - origin) @ axes[:2].T
         cell = _assign_pieces((points - origin) @ axes[:2].T, poly, best_split(directions, len(xyz)))
     return np.unique(cell, return_inverse=True)[1].reshape(-1)
+
+
+def _neck_cut(
+    points: NDArray[np.float64], loop: NDArray[np.float64], xyz: NDArray[np.float64], reach: float
+) -> NDArray[np.int64] | None:
+    """The segment cut in two along the chord between two corners that is shortest for the
+    loop arc it cuts off (``|x_i - x_j| / min(arc_ij, arc_ji)``: a thin strip's width
+    across it, small against its length); the next round cuts the halves on. None when no
+    chord leaves two parts of ``MIN_PIECE_POINTS`` points.
+
+    1. Candidates: corners ``i, j`` not next to each other on the loop, best ratio first.
+    2. The cut: the edges of the k-NN graph of ``points`` that cross the plane through
+       both corners along the surface normal (PCA of the points within ``reach`` of the
+       chord's middle), between points within ``reach`` of the chord segment; the two
+       largest components of the rest are the parts, other points join the nearer.
+    """
+    n = len(xyz)
+    _, at = cKDTree(loop).query(xyz)
+    step = np.linalg.norm(np.diff(np.vstack([loop, loop[:1]]), axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(step)]
+    pairs = [(i, j) for i in range(n) for j in range(i + 2, n) if not (i == 0 and j == n - 1)]
+    if not pairs:
+        return None
+
+    def ratio(i: int, j: int) -> float:
+        inner = abs(arc[at[j]] - arc[at[i]])
+        return float(np.linalg.norm(xyz[i] - xyz[j]) / max(min(inner, arc[-1] - inner), 1e-300))
+
+    k = min(GRAPH_NEIGHBOURS + 1, len(points))
+    tree = cKDTree(points)
+    idx = tree.query(points, k=k)[1]
+    rows, cols = np.repeat(np.arange(len(points)), k - 1), idx[:, 1:].ravel()
+    for i, j in sorted(pairs, key=lambda ij: ratio(*ij))[:EXACT_CORNERS]:
+        parts = _cut_parts(points, tree, rows, cols, xyz[i], xyz[j], reach)
+        if parts is not None:
+            return parts
+    return None
+
+
+def _cut_parts(
+    points: NDArray[np.float64], tree: cKDTree, rows: NDArray[np.int64], cols: NDArray[np.int64],
+    a: NDArray[np.float64], b: NDArray[np.float64], reach: float,
+) -> NDArray[np.int64] | None:
+    """Step 2 of :func:`_neck_cut` for the chord ``a``-``b`` (0/1 per point, or None)."""
+    near = points[tree.query_ball_point((a + b) / 2, max(reach, float(np.linalg.norm(b - a)) / 2))]
+    if len(near) < 3:
+        return None
+    normal = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1]
+    across = np.cross(b - a, normal)
+    across /= max(float(np.linalg.norm(across)), 1e-300)
+    side = (points - a) @ across > 0
+    t = np.clip((points - a) @ (b - a) / max(float((b - a) @ (b - a)), 1e-300), 0.0, 1.0)
+    close = np.linalg.norm(points - (a + t[:, None] * (b - a)), axis=1) <= reach
+    keep = ~(close[rows] & close[cols] & (side[rows] != side[cols]))
+    graph = coo_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(len(points),) * 2)
+    comp = connected_components(graph, directed=False)[1]
+    sizes = np.bincount(comp)
+    if len(sizes) < 2 or np.sort(sizes)[-2] < MIN_PIECE_POINTS:
+        return None
+    big = np.argsort(-sizes)[:2]
+    part = np.full(len(points), -1, dtype=np.int64)
+    part[comp == big[0]], part[comp == big[1]] = 0, 1
+    rest = part < 0
+    if rest.any():
+        _, nearest = cKDTree(points[~rest]).query(points[rest])
+        part[rest] = part[~rest][nearest]
+    return part
+
+
+def _has_crumbs(
+    points: NDArray[np.float64], loop: NDArray[np.float64], cell: NDArray[np.int64], reach: float
+) -> bool:
+    """Whether a connected part of a cell (parts as
+    :func:`~pde2cad.layout.adjacency.separate_pieces` finds them) is too small for a patch:
+    fewer than ``MIN_PIECE_POINTS`` points, or no point ``reach / 2`` away from the other
+    parts and the loop (narrower than ``reach``: the layout measures a corner's sides from
+    ``LOOP_FROM`` to ``LOOP_TO`` x ``reach`` along the loop, so such a part's corners fall
+    within each other's reach and cannot be told apart)."""
+    cell = np.unique(cell, return_inverse=True)[1].reshape(-1)
+    parts = separate_pieces(points, cell, int(cell.max()) + 1, min_points=1)[0]
+    names, counts = np.unique(parts, return_counts=True)
+    if counts.min() < MIN_PIECE_POINTS:
+        return True
+    for name in names:
+        mine = parts == name
+        width = cKDTree(np.vstack([points[~mine], loop])).query(points[mine])[0]
+        if float(width.max()) < reach / 2:
+            return True
+    return False
 
 
 def _absorb_small(points: NDArray[np.float64], which: NDArray[np.int64], least: int) -> NDArray[np.int64]:
