@@ -348,8 +348,9 @@ def _joint(
         # Scales of the two sides' ribbons at the ends (1 but on regular edges).
         lam = np.ones((2, NODES))
         if not one_apex and all(eps[c] or at_apex[j][0] for j, c in enumerate(key)):
-            sides.update(_paired_edge(key, users, (va, sa), (vb, sb)))
-            (lam[0], _), (lam[1], _) = _pair_lambdas(va, vb)
+            poles = (at_apex[0][0], at_apex[1][0])
+            sides.update(_paired_edge(key, users, (va, sa), (vb, sb), poles))
+            (lam[0], _), (lam[1], _) = _pair_lambdas(va, vb, poles)
         else:
             sides.update(_split_edge(
                 network.curves[key], key, users, (va, sa), (vb, sb), unknowns, key not in plain
@@ -473,14 +474,15 @@ def _paired_edge(
     users: list[int],
     own_a: tuple[NDArray[np.float64], NDArray[np.float64]],
     own_b: tuple[NDArray[np.float64], NDArray[np.float64]],
+    poles: tuple[bool, bool] = (False, False),
 ) -> dict[tuple[int, Key], _Terms]:
-    """Both ends regular: ``+lambda_A D`` for the first user, ``-lambda_B D`` for the second
+    """Both ends regular (or the apex of both users, ``poles``): ``+lambda_A D`` for the first user, ``-lambda_B D`` for the second
     (:func:`_pair_lambdas`; one tangent plane along the edge, C1 where the lambdas are 1).
 
     1. Each side's own estimate divided by its lambda (slopes by the product rule) gives
        ``D``; the two are averaged.
     2. Each side's node data are its signed lambda times ``D`` (values and slopes)."""
-    (lam_a, dlam_a), (lam_b, dlam_b) = _pair_lambdas(own_a[0], own_b[0])
+    (lam_a, dlam_a), (lam_b, dlam_b) = _pair_lambdas(own_a[0], own_b[0], poles)
     d_a, d_b = own_a[0] / lam_a[:, None], -own_b[0] / lam_b[:, None]
     s_a = (own_a[1] - dlam_a[:, None] * d_a) / lam_a[:, None]
     s_b = (-own_b[1] - dlam_b[:, None] * d_b) / lam_b[:, None]
@@ -498,20 +500,21 @@ def _paired_edge(
 
 
 def _pair_lambdas(
-    val_a: NDArray[np.float64], val_b: NDArray[np.float64]
+    val_a: NDArray[np.float64], val_b: NDArray[np.float64], poles: tuple[bool, bool] = (False, False)
 ) -> tuple[tuple[NDArray[np.float64], NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]:
     """Scale factors of the two inward ribbons of a regular edge on ``D``, values and slopes
     at the nodes, from the two sides' own node values ``val_a``, ``val_b`` (NODES, 3).
 
     1. At each end the speed ratio ``r = |I_A| / |I_B|`` (the sides' own end values are
-       the pair's opposite, scaled side derivatives); an end where either vanishes (an
-       apex) takes the other end's ratio, 1 when both do.
+       the pair's opposite, scaled side derivatives); an end at the apex of both users
+       (``poles``; both vanish, their ratio is rounding noise) takes the other end's
+       ratio, 1 when both are.
     2. ``lambda_A = 2 r / (1 + r)``, ``lambda_B = 2 / (1 + r)`` there (their ratio is
        ``r``; both 1 for ``r = 1``), blended along the edge by ``3 t^2 - 2 t^3``: zero slopes
        at the corners keep the twists of :func:`_corner_speeds` compatible, and equal end
        ratios give constants (both ribbons exactly parallel)."""
     na, nb = np.linalg.norm(val_a[[0, -1]], axis=1), np.linalg.norm(val_b[[0, -1]], axis=1)
-    ok = (na > 0) & (nb > 0)
+    ok = ~np.array(poles) & (na > 0) & (nb > 0)
     r = np.where(ok, na / np.maximum(nb, 1e-300), 1.0)
     if ok.sum() == 1:
         r[:] = r[ok][0]
