@@ -98,6 +98,11 @@ QUADRIC_RADIUS = 3.0
 PAIR_ANGLE = 60.0
 #: Edge data points averaged per station of the edge's length (:func:`_data_length`).
 LENGTH_BIN = 8
+#: Pairs linked along a line of regular edges share their mean length ratio when their own
+#: ratios lie within this factor of each other (each then runs within sqrt(2) of its own
+#: ratio, far from the 3x overshoot of :func:`_pair_scales`); wider spreads keep their own
+#: (k-means capsule: a 3.75 ratio averaged to 0.83 and the short edge turned 90 deg).
+PAIR_SPREAD = 2.0
 #: A corner is smooth when its segments' own local quadrics give normals at the corner within
 #: SMOOTH_ANGLE degrees, or when one quadric over all its segments' nearby points leaves an RMS
 #: residual below SMOOTH_RATIO x that of a quadric per segment (or below SMOOTH_FLOOR x the
@@ -895,12 +900,14 @@ def _pair_scales(
     are ``lambda_A D`` and ``-lambda_B D`` (:mod:`pde2cad.layout.ribbons`), in one plane with
     the edge everywhere only when ``lambda_A / lambda_B`` is constant; at either end it is
     the speed ratio of the pair there (the two patches' other sides). So all pairs crossing
-    one line of such edges take one ratio.
+    one line of such edges take one ratio, when they roughly agree; where they do not, each
+    keeps its own and the ribbons blend between the ends (one tangent plane at the nodes).
 
     1. Nodes: the pairs, each with its log length ratio (``lengths``, first edge over second).
     2. Links: a shared edge with both ends regular ties the pairs at its ends (signed by
        which of each pair is the first user's side).
-    3. Per linked set, the signed mean log ratio (sets whose signs conflict keep 1).
+    3. Per linked set, the signed mean log ratio if the signed ratios lie within
+       ``PAIR_SPREAD`` (and the signs agree around the set); else each pair its own.
     """
     want = {(c, p): float(np.log(max(lengths[p[0]], 1e-300) / max(lengths[p[1]], 1e-300)))
             for c, plist in pairs.items() for p in plist}
@@ -932,8 +939,11 @@ def _pair_scales(
                     sign[m] = sign[n] * s
                     stack.append(m)
                 conflict |= sign[m] != sign[n] * s
-        mean = 0.0 if conflict else float(np.mean([sign[n] * want[n] for n in sign]))
-        log_ratio.update({n: sign[n] * mean for n in sign})
+        signed = np.array([sign[n] * want[n] for n in sign])
+        if conflict or np.ptp(signed) > np.log(PAIR_SPREAD):
+            log_ratio.update({n: want[n] for n in sign})
+        else:
+            log_ratio.update({n: sign[n] * float(signed.mean()) for n in sign})
     out: dict[tuple[int, Key], float] = {}
     for (c, (ea, eb)), q in log_ratio.items():
         out[(c, ea)], out[(c, eb)] = float(np.exp(0.5 * q)), float(np.exp(-0.5 * q))
