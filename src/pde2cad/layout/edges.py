@@ -103,6 +103,11 @@ LENGTH_BIN = 8
 #: ratio, far from the 3x overshoot of :func:`_pair_scales`); wider spreads keep their own
 #: (k-means capsule: a 3.75 ratio averaged to 0.83 and the short edge turned 90 deg).
 PAIR_SPREAD = 2.0
+#: A pair's speed ratio is its length ratio divided by up to PAIR_SLACK (1 below it): each
+#: edge then runs within 1.5x of its own length's speed, half the 3x at which it folds, and
+#: near-equal pairs keep one speed (C1, not only G1: automatic torus_npm layout, 138
+#: patches, seam 0.76 deg with one speed, 0.98 with every pair scaled).
+PAIR_SLACK = 1.5
 #: A corner is smooth when its segments' own local quadrics give normals at the corner within
 #: SMOOTH_ANGLE degrees, or when one quadric over all its segments' nearby points leaves an RMS
 #: residual below SMOOTH_RATIO x that of a quadric per segment (or below SMOOTH_FLOOR x the
@@ -903,7 +908,8 @@ def _pair_scales(
     one line of such edges take one ratio, when they roughly agree; where they do not, each
     keeps its own and the ribbons blend between the ends (one tangent plane at the nodes).
 
-    1. Nodes: the pairs, each with its log length ratio (``lengths``, first edge over second).
+    1. Nodes: the pairs, each with its log length ratio (``lengths``, first edge over second),
+       less ``PAIR_SLACK``.
     2. Links: a shared edge with both ends regular ties the pairs at its ends (signed by
        which of each pair is the first user's side).
     3. Per linked set, the signed mean log ratio if the signed ratios lie within
@@ -911,6 +917,8 @@ def _pair_scales(
     """
     want = {(c, p): float(np.log(max(lengths[p[0]], 1e-300) / max(lengths[p[1]], 1e-300)))
             for c, plist in pairs.items() for p in plist}
+    slack = np.log(PAIR_SLACK)
+    want = {n: float(np.sign(q) * max(abs(q) - slack, 0.0)) for n, q in want.items()}
     links: dict[tuple[int, tuple[Key, Key]], list[tuple[tuple[int, tuple[Key, Key]], float]]] = {
         n: [] for n in want}
     other = _other_sides(loops)
