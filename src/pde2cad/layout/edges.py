@@ -22,9 +22,11 @@ the curves the patches share:
    inside a sample spacing of the truth, where the nearest cloud point may be a spacing off.
 6. **Joint fit.** All edges are refitted together with their ends on the refined corners and
    their end tangents in the corner's tangent plane. Where the edges through a corner pair
-   up (four patches meeting, or two patches meeting the open boundary), opposite edges get
-   equal and opposite end derivatives: the layout that lets
-   :mod:`pde2cad.layout.ribbons` build C1 joins. Where an odd number of patches meet
+   up (four patches meeting, or two patches meeting the open boundary), opposite edges leave
+   it in opposite directions, each at a speed scaled to its own length (a short edge made
+   to start at a long one's speed overshoots and folds back), with the speed ratio of a pair
+   kept equal along each line of paired edges (:func:`_pair_scales`): the layout that lets
+   :mod:`pde2cad.layout.ribbons` build G1 joins. Where an odd number of patches meet
    (three on a cube-sphere) no such pairing exists (the vertex-enclosure problem).
 
 Uniform spans with a power-of-two count give dyadic breaks, so an edge reversed for the
@@ -94,6 +96,18 @@ EXTRAPOLATION = 2.0
 QUADRIC_RADIUS = 3.0
 #: Edges through a corner are paired when their free fits turn by less than this (degrees).
 PAIR_ANGLE = 60.0
+#: Edge data points averaged per station of the edge's length (:func:`_data_length`).
+LENGTH_BIN = 8
+#: Pairs linked along a line of regular edges share their mean length ratio when their own
+#: ratios lie within this factor of each other (each then runs within sqrt(2) of its own
+#: ratio, far from the 3x overshoot of :func:`_pair_scales`); wider spreads keep their own
+#: (k-means capsule: a 3.75 ratio averaged to 0.83 and the short edge turned 90 deg).
+PAIR_SPREAD = 2.0
+#: A pair's speed ratio is its length ratio divided by up to PAIR_SLACK (1 below it): each
+#: edge then runs within 1.5x of its own length's speed, half the 3x at which it folds, and
+#: near-equal pairs keep one speed (C1, not only G1: automatic torus_npm layout, 138
+#: patches, seam 0.76 deg with one speed, 0.98 with every pair scaled).
+PAIR_SLACK = 1.5
 #: A corner is smooth when its segments' own local quadrics give normals at the corner within
 #: SMOOTH_ANGLE degrees, or when one quadric over all its segments' nearby points leaves an RMS
 #: residual below SMOOTH_RATIO x that of a quadric per segment (or below SMOOTH_FLOOR x the
@@ -164,7 +178,8 @@ class EdgeNetwork:
     rms : dict[(int, int), float]
         Root-mean-square of the same distances.
     pairs : dict[int, list[((int, int), (int, int))]]
-        Per corner, the edges paired across it (equal and opposite end derivatives).
+        Per corner, the edges paired across it (opposite end directions; speeds in the
+        ratio ``scales`` gives).
     regular : dict[int, bool]
         Whether each corner admits the pairing (every edge in at most one pair).
     spans : dict[(int, int), int]
@@ -172,6 +187,9 @@ class EdgeNetwork:
     creases : set of (int, int)
         Shared edges whose two segments' own surfaces (fitted to their points) meet at more
         than ``CREASE_ANGLE`` along them.
+    scales : dict[(int, (int, int)), float]
+        Per (corner, edge) of a pair, the factor on the pair's shared end derivative
+        (:func:`_pair_scales`; the two factors of a pair multiply to 1).
     """
 
     corners: NDArray[np.float64]
@@ -185,6 +203,7 @@ class EdgeNetwork:
     regular: dict[int, bool]
     spans: dict[Key, int] = field(default_factory=dict)
     creases: set[Key] = field(default_factory=set)
+    scales: dict[tuple[int, Key], float] = field(default_factory=dict)
 
     def sides(self, label: int) -> list[PiecewiseBezier]:
         """The segment's sides as a head-to-tail loop (edges reversed where needed)."""
@@ -307,6 +326,18 @@ def _edge_params(
         return t
     arc = d0 / np.maximum(d0 + d1, 1e-300)
     return arc if np.abs(arc - t).max() > FOLDED_EDGE else t
+
+
+def _data_length(
+    data: NDArray[np.float64], t: NDArray[np.float64], p0: NDArray[np.float64], p1: NDArray[np.float64]
+) -> float:
+    """Length of an edge: the polyline from ``p0`` through the means of its data in runs of
+    ``LENGTH_BIN`` points along their parameters ``t`` to ``p1`` (the means average the
+    band's width out; a free fit of a few points can loop and be many times longer)."""
+    order = np.argsort(t)
+    runs = np.array_split(order, max(1, len(order) // LENGTH_BIN))
+    path = np.vstack([p0, [data[r].mean(axis=0) for r in runs], p1])
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
 def _open_flags(layout: Layout, corners: NDArray[np.float64]) -> NDArray[np.bool_] | None:
@@ -664,6 +695,7 @@ def build_edges(
     at_corner: dict[int, list[tuple[Key, int]]] = {c: [] for c in range(len(corners))}
     spans: dict[Key, int] = {}
     params: dict[Key, NDArray[np.float64]] = {}
+    lengths: dict[Key, float] = {}
     ends: dict[tuple[Key, int], tuple[NDArray[np.float64], NDArray[np.float64], float]] = {}
     for key, pts_e in data.items():
         p0, p1 = corners[key[0]], corners[key[1]]
@@ -682,6 +714,7 @@ def build_edges(
         pick = pick[np.linspace(0, len(pick) - 1, min(len(pick), SPAN_SAMPLE)).astype(np.int64)]
         n, _, _ = _choose_spans(pts_e[pick], t[pick])
         spans[key] = n
+        lengths[key] = _data_length(pts_e, t, p0, p1)
         length = float(np.linalg.norm(chord))
         for end in (0, 1):
             ends[(key, end)] = _end_line(
@@ -723,6 +756,7 @@ def build_edges(
                 creases.add(key)
                 smooth[key[0]] = smooth[key[1]] = False
     pairs, regular = _pairs(loops, users, len(corners), away, smooth)
+    scales = _pair_scales(pairs, regular, loops, users, lengths)
     # At a crease corner the quadric over all segments rounds the corner off: put it on the
     # intersection of the segments' own surfaces instead (nearest point to the estimate).
     for c, incident in at_corner.items():
@@ -737,7 +771,7 @@ def build_edges(
         chord = p1 - p0
         params[key] = _edge_params(pts_e, p0, p1, radius)
     legs = _leg_bases(corners, normals, smooth, users, sheets)
-    splines = _joint_fit(data, params, spans, corners, legs, pairs, FAIRNESS)
+    splines = _joint_fit(data, params, spans, corners, legs, pairs, scales, FAIRNESS)
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is
     # better taken from the whole cloud: project samples of each edge onto a local quadric
     # and refit them (noise-free samples afford more spans).
@@ -756,7 +790,7 @@ def build_edges(
         if key in creases:
             # A crease's samples belong on the intersection of the two segments' surfaces.
             samples[key] = sheets.intersect(raw, sorted(users[key]))
-    splines = _joint_fit(samples, sample_t, final, corners, legs, pairs)
+    splines = _joint_fit(samples, sample_t, final, corners, legs, pairs, scales)
     curves, errors, rms = {}, {}, {}
     for key, spline in splines.items():
         t = _project(spline, data[key], params[key])
@@ -764,7 +798,7 @@ def build_edges(
         errors[key], rms[key] = float(dist.max()), float(np.sqrt((dist**2).mean()))
         curves[key] = _to_bezier(spline, final[key], corners[key[0]], corners[key[1]])
     return EdgeNetwork(corners, normals, loops, curves, users, errors, rms, pairs, regular, final,
-                       creases)
+                       creases, scales)
 
 
 def _orient(
@@ -807,6 +841,18 @@ def _orient(
     return loops
 
 
+def _other_sides(loops: dict[int, list[int]]) -> dict[tuple[int, int], dict[Key, Key]]:
+    """Per (segment, corner), each of its two sides there mapped to the other one."""
+    other: dict[tuple[int, int], dict[Key, Key]] = {}
+    for label, ids in loops.items():
+        c = len(ids)
+        for k in range(c):
+            prev_key = key_of(ids[k - 1], ids[k])
+            next_key = key_of(ids[k], ids[(k + 1) % c])
+            other[(label, ids[k])] = {prev_key: next_key, next_key: prev_key}
+    return other
+
+
 def _pairs(
     loops: dict[int, list[int]],
     users: dict[Key, list[int]],
@@ -817,13 +863,7 @@ def _pairs(
     """Edges paired across each corner: for a shared edge, the two patches' other edges,
     when the surface is smooth at the corner or they run on smoothly through it (a crease
     keeps its kink)."""
-    other: dict[tuple[int, int], dict[Key, Key]] = {}
-    for label, ids in loops.items():
-        c = len(ids)
-        for k in range(c):
-            prev_key = key_of(ids[k - 1], ids[k])
-            next_key = key_of(ids[k], ids[(k + 1) % c])
-            other[(label, ids[k])] = {prev_key: next_key, next_key: prev_key}
+    other = _other_sides(loops)
     pairs: dict[int, list[tuple[Key, Key]]] = {c: [] for c in range(n_corners)}
     wanted: dict[int, set[tuple[Key, Key]]] = {c: set() for c in range(n_corners)}
     for key, who in users.items():
@@ -847,6 +887,75 @@ def _pairs(
                 pairs[corner].append((ea, eb))
         regular[corner] = ok and len(pairs[corner]) == len(candidates)
     return pairs, regular
+
+
+def _pair_scales(
+    pairs: dict[int, list[tuple[Key, Key]]],
+    regular: dict[int, bool],
+    loops: dict[int, list[int]],
+    users: dict[Key, list[int]],
+    lengths: dict[Key, float],
+) -> dict[tuple[int, Key], float]:
+    """Speed factors on the shared end derivative of each pair ``(ea, eb)`` at a corner:
+    ``sqrt(r)`` for ``ea``, ``1 / sqrt(r)`` for ``eb``, ``r`` near their length ratio.
+
+    A cubic of chord L leaving both ends along it at speed m runs backwards at its middle
+    once m > 3 L (Hermite: x'(1/2) = 1.5 L - 0.5 m), so one speed for a short and a long
+    edge folds the short one. The ribbons across a shared edge between two regular corners
+    are ``lambda_A D`` and ``-lambda_B D`` (:mod:`pde2cad.layout.ribbons`), in one plane with
+    the edge everywhere only when ``lambda_A / lambda_B`` is constant; at either end it is
+    the speed ratio of the pair there (the two patches' other sides). So all pairs crossing
+    one line of such edges take one ratio, when they roughly agree; where they do not, each
+    keeps its own and the ribbons blend between the ends (one tangent plane at the nodes).
+
+    1. Nodes: the pairs, each with its log length ratio (``lengths``, first edge over second),
+       less ``PAIR_SLACK``.
+    2. Links: a shared edge with both ends regular ties the pairs at its ends (signed by
+       which of each pair is the first user's side).
+    3. Per linked set, the signed mean log ratio if the signed ratios lie within
+       ``PAIR_SPREAD`` (and the signs agree around the set); else each pair its own.
+    """
+    want = {(c, p): float(np.log(max(lengths[p[0]], 1e-300) / max(lengths[p[1]], 1e-300)))
+            for c, plist in pairs.items() for p in plist}
+    slack = np.log(PAIR_SLACK)
+    want = {n: float(np.sign(q) * max(abs(q) - slack, 0.0)) for n, q in want.items()}
+    links: dict[tuple[int, tuple[Key, Key]], list[tuple[tuple[int, tuple[Key, Key]], float]]] = {
+        n: [] for n in want}
+    other = _other_sides(loops)
+    for key, who in users.items():
+        if len(who) != 2 or not all(regular.get(c, False) for c in key):
+            continue
+        ends = []
+        for c in key:
+            ea, eb = other[(who[0], c)][key], other[(who[1], c)][key]
+            pair = (min(ea, eb), max(ea, eb))
+            if (c, pair) in want:
+                ends.append(((c, pair), 1.0 if pair[0] == ea else -1.0))
+        if len(ends) == 2:
+            (n0, s0), (n1, s1) = ends
+            links[n0].append((n1, s0 * s1))
+            links[n1].append((n0, s0 * s1))
+    log_ratio: dict[tuple[int, tuple[Key, Key]], float] = {}
+    for seed in want:
+        if seed in log_ratio:
+            continue
+        sign, stack, conflict = {seed: 1.0}, [seed], False
+        while stack:
+            n = stack.pop()
+            for m, s in links[n]:
+                if m not in sign:
+                    sign[m] = sign[n] * s
+                    stack.append(m)
+                conflict |= sign[m] != sign[n] * s
+        signed = np.array([sign[n] * want[n] for n in sign])
+        if conflict or np.ptp(signed) > np.log(PAIR_SPREAD):
+            log_ratio.update({n: want[n] for n in sign})
+        else:
+            log_ratio.update({n: sign[n] * float(signed.mean()) for n in sign})
+    out: dict[tuple[int, Key], float] = {}
+    for (c, (ea, eb)), q in log_ratio.items():
+        out[(c, ea)], out[(c, eb)] = float(np.exp(0.5 * q)), float(np.exp(-0.5 * q))
+    return out
 
 
 class _Sheets:
@@ -1034,11 +1143,12 @@ def _joint_fit(
     corners: NDArray[np.float64],
     legs: dict[tuple[int, Key], NDArray[np.float64]],
     pairs: dict[int, list[tuple[Key, Key]]],
+    scales: dict[tuple[int, Key], float],
     fairness: float = 0.0,
 ) -> dict[Key, BSpline]:
     """All edges at once: ends on the corners, end legs along ``legs`` (the corner's tangent
-    plane, or a crease line), paired edges with equal and opposite end derivatives (at
-    regular corners).
+    plane, or a crease line), paired edges with opposite end derivatives, ``scales`` times
+    one shared vector (where no edge is in two pairs).
 
     ``fairness`` > 0 adds the squared jumps of each edge's third derivative at its end knots
     (:func:`_end_jumps`), weighted ``fairness x`` (data points per control point), as
@@ -1046,7 +1156,7 @@ def _joint_fit(
     but an end span cannot hook towards a few noisy points near a corner (measured on sparse
     cube-spheres: end hooks of 15-28 deg)."""
     basis = dict(legs)
-    # Leg unknowns: one k-vector per (corner, edge end), shared (with a sign) by a pair.
+    # Leg unknowns: one k-vector per (corner, edge end), shared (with a signed scale) by a pair.
     leg_var: dict[tuple[int, Key], tuple[int, float]] = {}
     n_var = 0
     for c, plist in pairs.items():
@@ -1055,8 +1165,8 @@ def _joint_fit(
             continue  # irregular corner: no pairing
         for ea, eb in plist:
             basis[(c, eb)] = basis[(c, ea)]  # one shared leg, so one set of directions
-            leg_var[(c, ea)] = (n_var, 1.0)
-            leg_var[(c, eb)] = (n_var, -1.0)
+            leg_var[(c, ea)] = (n_var, scales.get((c, ea), 1.0))
+            leg_var[(c, eb)] = (n_var, -scales.get((c, eb), 1.0))
             n_var += len(basis[(c, ea)])
     offsets: dict[Key, int] = {}
     for key in data:

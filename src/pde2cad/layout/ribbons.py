@@ -8,13 +8,18 @@ The corner values are fixed: bicubic Coons needs a ribbon to start at the deriva
 patch's other side leaving the corner, and each patch keeps its own.
 
 * **Regular edges** (both corners regular: four patches, or two and the open boundary; see
-  :mod:`pde2cad.layout.edges`). ``D(t) = (I_A - I_B) / 2`` on the edge's own parameter, node
-  by node of the Hermite pieces; patch A uses ``+D``, patch B ``-D``. The joint edge fit made
-  the side derivatives at such corners equal and opposite, so ``±D`` also meet both
-  patches' end values: C1 along the whole edge. At a corner every patch needs one twist
-  ``S_uv`` matching both its ribbons; the inward ribbons' slopes *away from the corner* flip
-  sign across each shared edge, so one vector ``ω`` per corner, with alternating signs
-  around it, keeps all patches compatible.
+  :mod:`pde2cad.layout.edges`). Patch A uses ``lambda_A D``, patch B ``-lambda_B D``, with
+  ``D`` shared, node by node of the Hermite pieces on the edge's own parameter. The joint
+  edge fit made the side derivatives at such corners opposite, each scaled to its edge's
+  length (a pair's speed ratio ``r``), so ``lambda_A / lambda_B = r`` at each end meets both
+  patches' end values; the edge fit keeps ``r`` equal at both ends of such an edge, so the
+  lambdas are constants and both ribbons are parallel all along it: G1 along the whole
+  edge (C1 where ``r = 1``). Should the two ends differ, the lambdas blend between them
+  with zero end slopes (:func:`_pair_lambdas`), exact at the nodes only. At a corner every
+  patch needs one twist ``S_uv`` matching both its ribbons; the inward ribbons' slopes *away
+  from the corner* flip sign and scale by ``r`` across each shared edge, so one vector ``ω``
+  per corner, times each patch's product of its two sides' speeds there and with
+  alternating signs around it, keeps all patches compatible.
 * **Edges with an odd-valence end** (three or five patches, e.g. a cube-sphere; vertex
   enclosure: exact G1 of bicubic patches is impossible there). Averaging ``I_A`` and
   ``-I_B`` would cancel each patch's component *along* the edge, the shear of its
@@ -340,8 +345,12 @@ def _joint(
             # ribbon (C0 there). The estimates alone are not enough: one running nearly along
             # the edge (a sheared piece of a k-means capsule) read a smooth seam as 172 deg.
             continue
+        # Scales of the two sides' ribbons at the ends (1 but on regular edges).
+        lam = np.ones((2, NODES))
         if not one_apex and all(eps[c] or at_apex[j][0] for j, c in enumerate(key)):
-            sides.update(_paired_edge(key, users, (va, sa), (vb, sb)))
+            poles = (at_apex[0][0], at_apex[1][0])
+            sides.update(_paired_edge(key, users, (va, sa), (vb, sb), poles))
+            (lam[0], _), (lam[1], _) = _pair_lambdas(va, vb, poles)
         else:
             sides.update(_split_edge(
                 network.curves[key], key, users, (va, sa), (vb, sb), unknowns, key not in plain
@@ -353,9 +362,10 @@ def _joint(
             if at_apex[j][0] and at_apex[j][1]:
                 node = 0 if j == 0 else NODES - 1
                 normal = network.normals[c] / max(float(np.linalg.norm(network.normals[c])), 1e-300)
-                w = 0.5 * (sa[node] - sb[node])
+                w = 0.5 * (sa[node] / lam[0, node] - sb[node] / lam[1, node])
                 w = w - (w @ normal) * normal
-                apex_slope[(users[0], key)], apex_slope[(users[1], key)] = w, -w
+                apex_slope[(users[0], key)] = lam[0, node] * w
+                apex_slope[(users[1], key)] = -lam[1, node] * w
     data = {
         label: _patch_terms(label, network, own[label], sides, eps, omega, unknowns, apex, apex_slope)
         for label in sorted(four)
@@ -432,15 +442,31 @@ def _omega(
     signs: dict[int, float],
 ) -> NDArray[np.float64]:
     """Twist vector of a regular corner: the mean over its patches of the own ribbons'
-    slopes away from it, with the alternating signs."""
+    slopes away from it, with the alternating signs, per unit product of the patch's side
+    speeds there (:func:`_corner_speeds`)."""
     samples = []
     for label, e in signs.items():
         ids = network.loops[label]
         i = ids.index(corner)
+        speeds = _corner_speeds(network, label, corner)
         for k in ((i - 1) % len(ids), i):  # the sides ending and starting at the corner
             _, slope = own[label][k]
-            samples.append(e * (slope[0] if ids[k] == corner else -slope[-1]))
+            samples.append(e * (slope[0] if ids[k] == corner else -slope[-1]) / speeds)
     return np.mean(samples, axis=0)
+
+
+def _corner_speeds(network: EdgeNetwork, label: int, corner: int) -> float:
+    """Product of the speeds ``|C'|`` of the patch's two sides at ``corner``: its twist
+    there scales with it (``S_uv`` of a reparameterization ``u -> a u, v -> b v`` is
+    ``a b`` times the old one), which keeps the twists compatible across scaled pairs."""
+    ids = network.loops[label]
+    i = ids.index(corner)
+    out = 1.0
+    for other in (ids[i - 1], ids[(i + 1) % len(ids)]):
+        key = key_of(corner, other)
+        end = np.array([0.0 if key[0] == corner else 1.0])
+        out *= float(np.linalg.norm(network.curves[key].derivative(end)[0]))
+    return max(out, 1e-300)
 
 
 def _paired_edge(
@@ -448,19 +474,57 @@ def _paired_edge(
     users: list[int],
     own_a: tuple[NDArray[np.float64], NDArray[np.float64]],
     own_b: tuple[NDArray[np.float64], NDArray[np.float64]],
+    poles: tuple[bool, bool] = (False, False),
 ) -> dict[tuple[int, Key], _Terms]:
-    """Both ends regular: ``+D`` for the first user, ``-D`` for the second (exact C1)."""
-    guess_val = (own_a[0] - own_b[0]) / 2
-    guess_slope = (own_a[1] - own_b[1]) / 2
+    """Both ends regular (or the apex of both users, ``poles``): ``+lambda_A D`` for the first user, ``-lambda_B D`` for the second
+    (:func:`_pair_lambdas`; one tangent plane along the edge, C1 where the lambdas are 1).
+
+    1. Each side's own estimate divided by its lambda (slopes by the product rule) gives
+       ``D``; the two are averaged.
+    2. Each side's node data are its signed lambda times ``D`` (values and slopes)."""
+    (lam_a, dlam_a), (lam_b, dlam_b) = _pair_lambdas(own_a[0], own_b[0], poles)
+    d_a, d_b = own_a[0] / lam_a[:, None], -own_b[0] / lam_b[:, None]
+    s_a = (own_a[1] - dlam_a[:, None] * d_a) / lam_a[:, None]
+    s_b = (-own_b[1] - dlam_b[:, None] * d_b) / lam_b[:, None]
+    guess_val, guess_slope = (d_a + d_b) / 2, (s_a + s_b) / 2
     out = {}
-    for label, sign in zip(users, (1.0, -1.0), strict=True):
+    for label, sign, lam, dlam in zip(users, (1.0, -1.0), (lam_a, lam_b), (dlam_a, dlam_b), strict=True):
         # Not refitted: the averaged estimates measured better after the deformation on the
         # cylinder than a least-squares refit of the bases (which weighs the interior, where
         # the deformation works anyway), though slightly worse on the torus.
         terms = _Terms((2, NODES))
-        terms.fixed[0], terms.fixed[1] = sign * guess_val, sign * guess_slope
+        terms.fixed[0] = sign * lam[:, None] * guess_val
+        terms.fixed[1] = sign * (dlam[:, None] * guess_val + lam[:, None] * guess_slope)
         out[(label, key)] = terms
     return out
+
+
+def _pair_lambdas(
+    val_a: NDArray[np.float64], val_b: NDArray[np.float64], poles: tuple[bool, bool] = (False, False)
+) -> tuple[tuple[NDArray[np.float64], NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Scale factors of the two inward ribbons of a regular edge on ``D``, values and slopes
+    at the nodes, from the two sides' own node values ``val_a``, ``val_b`` (NODES, 3).
+
+    1. At each end the speed ratio ``r = |I_A| / |I_B|`` (the sides' own end values are
+       the pair's opposite, scaled side derivatives); an end at the apex of both users
+       (``poles``; both vanish, their ratio is rounding noise) takes the other end's
+       ratio, 1 when both are.
+    2. ``lambda_A = 2 r / (1 + r)``, ``lambda_B = 2 / (1 + r)`` there (their ratio is
+       ``r``; both 1 for ``r = 1``), blended along the edge by ``3 t^2 - 2 t^3``: zero slopes
+       at the corners keep the twists of :func:`_corner_speeds` compatible, and equal end
+       ratios give constants (both ribbons exactly parallel)."""
+    na, nb = np.linalg.norm(val_a[[0, -1]], axis=1), np.linalg.norm(val_b[[0, -1]], axis=1)
+    ok = ~np.array(poles) & (na > 0) & (nb > 0)
+    r = np.where(ok, na / np.maximum(nb, 1e-300), 1.0)
+    if ok.sum() == 1:
+        r[:] = r[ok][0]
+    t = BREAKS
+    w, dw = 3 * t**2 - 2 * t**3, 6 * t - 6 * t**2
+    out = []
+    for end_values in (2 * r / (1 + r), 2 / (1 + r)):
+        lo, hi = end_values
+        out.append((lo + (hi - lo) * w, (hi - lo) * dw))
+    return out[0], out[1]
 
 
 def _split_edge(
@@ -588,7 +652,8 @@ def _patch_terms(
                     data.fixed[k, 1, i] = (1.0 if forward else -1.0) * w
                 continue
             if label in eps[corner]:
-                data.fixed[k, 1, i] = sgn_end * eps[corner][label] * omega[corner]
+                speeds = _corner_speeds(network, label, corner)
+                data.fixed[k, 1, i] = sgn_end * eps[corner][label] * speeds * omega[corner]
             else:
                 x = unknowns.get(("twist", label, corner), guess)
                 data.add((k, 1, i), x, sgn_end)
