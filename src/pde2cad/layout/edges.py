@@ -912,13 +912,16 @@ def _pair_scales(
        less ``PAIR_SLACK``.
     2. Links: a shared edge with both ends regular ties the pairs at its ends (signed by
        which of each pair is the first user's side).
-    3. Per linked set, the signed mean log ratio if the signed ratios lie within
-       ``PAIR_SPREAD`` (and the signs agree around the set); else each pair its own.
+    3. Per linked set, the signed mean log ratio if the raw (unslacked) signed ratios lie
+       within ``PAIR_SPREAD`` (and the signs agree around the set); else each pair its own.
+       Judging the spread after the slack would call 1.0 and 2.9 alike (0 and 0.66 after
+       a 1.5 slack) and average pairs that the ribbons must blend between.
     """
     want = {(c, p): float(np.log(max(lengths[p[0]], 1e-300) / max(lengths[p[1]], 1e-300)))
             for c, plist in pairs.items() for p in plist}
     slack = np.log(PAIR_SLACK)
-    want = {n: float(np.sign(q) * max(abs(q) - slack, 0.0)) for n, q in want.items()}
+    raw = dict(want)
+    want = {n: float(np.sign(q) * max(abs(q) - slack, 0.0)) for n, q in raw.items()}
     links: dict[tuple[int, tuple[Key, Key]], list[tuple[tuple[int, tuple[Key, Key]], float]]] = {
         n: [] for n in want}
     other = _other_sides(loops)
@@ -948,7 +951,8 @@ def _pair_scales(
                     stack.append(m)
                 conflict |= sign[m] != sign[n] * s
         signed = np.array([sign[n] * want[n] for n in sign])
-        if conflict or np.ptp(signed) > np.log(PAIR_SPREAD):
+        spread = np.ptp([sign[n] * raw[n] for n in sign])
+        if conflict or spread > np.log(PAIR_SPREAD):
             log_ratio.update({n: want[n] for n in sign})
         else:
             log_ratio.update({n: sign[n] * float(signed.mean()) for n in sign})
