@@ -33,6 +33,15 @@ def test_read_surface_keeps_mesh_faces_and_samples_on_them(tmp_path: Path) -> No
     assert len(s.vertices) == len(sphere.vertices)
     r = np.linalg.norm(s.points, axis=1)
     assert len(s.points) == 5000 and r.max() <= 2.0 + 1e-9 and r.min() > 2.0 * 0.98
+    # Each point knows the triangle it was sampled on (its crease region, with no search):
+    # it lies inside that triangle (barycentric coordinates in [0, 1], off its plane ~0).
+    a, b, c = (s.vertices[s.triangles[s.point_triangles, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    area2 = np.einsum("ij,ij->i", normal, normal)
+    off = np.abs(np.einsum("ij,ij->i", s.points - a, normal)) / np.sqrt(area2)
+    w_b = np.einsum("ij,ij->i", np.cross(s.points - a, c - a), normal) / area2
+    w_c = np.einsum("ij,ij->i", np.cross(b - a, s.points - a), normal) / area2
+    assert off.max() < 1e-12 and w_b.min() > -1e-9 and w_c.min() > -1e-9 and (w_b + w_c).max() < 1 + 1e-9
 
 
 def test_read_surface_reads_an_unlabelled_cloud(tmp_path: Path) -> None:

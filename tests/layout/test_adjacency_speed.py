@@ -112,3 +112,22 @@ def test_dense_cloud_corners() -> None:
     assert len(layout.corners) == 8 and len(set(nearest.tolist())) == 8
     assert dist.max() < 4.0 * layout.radius
     assert all(len(w) == 4 for w in layout.segment_corners.values())
+
+
+def test_a_second_layout_of_the_same_cloud_reuses_its_border_spans_and_equals_the_first() -> None:
+    """The split step lays out one cloud dozens of times; border spans are kept between
+    calls (by a checksum of the points), which must change nothing, and a moved cloud
+    must not reuse them."""
+    import pde2cad.layout.adjacency as adjacency
+
+    cloud = sphere6(n_points=12000, seed=4)
+    first = build_layout(cloud.points, cloud.labels)
+    kept = dict(adjacency._SPANS)
+    assert kept, "the spans of the first layout are kept"
+    again = build_layout(cloud.points.copy(), cloud.labels)
+    assert adjacency._SPANS == kept
+    assert again.adjacency == first.adjacency and np.array_equal(again.corners, first.corners)
+    assert all(np.array_equal(again.borders[p], first.borders[p]) for p in first.borders)
+    scaled = build_layout(cloud.points * 1.5, cloud.labels)
+    assert not set(adjacency._SPANS.values()) & set(kept.values())
+    assert scaled.adjacency == first.adjacency

@@ -87,12 +87,16 @@ class Surface:
     triangles : (F, 3) int or None
     source : str
         ``"mesh"`` or ``"cloud"``.
+    point_triangles : (N,) int or None
+        The triangle each point of a mesh was sampled on (its crease region is that
+        triangle's, with no search).
     """
 
     points: NDArray[np.float64]
     vertices: NDArray[np.float64] | None
     triangles: NDArray[np.int64] | None
     source: str
+    point_triangles: NDArray[np.int64] | None = None
 
 
 def _is_mesh_file(path: Path) -> bool:
@@ -173,7 +177,7 @@ def read_surface(path: str | Path, sample_points: int = MESH_SAMPLES, seed: int 
     a, b, c = (vertices[tris[face, k]] for k in range(3))
     points = a + r[:, :1] * (b - a) + r[:, 1:] * (c - a)
     _check_spread(points, path)
-    return Surface(points, vertices, tris, "mesh")
+    return Surface(points, vertices, tris, "mesh", face.astype(np.int64))
 
 
 def _check_spread(points: NDArray[np.float64], path: Path) -> None:
@@ -407,7 +411,8 @@ def auto_layout(
     if n_creases:
         # Patches end at the creases: labels split by smooth region, and a flat-ish disk
         # between creases is one patch.
-        regions = point_regions(surface.points, vertices, tris, tri_region)
+        regions = (tri_region[surface.point_triangles] if surface.point_triangles is not None
+                   else point_regions(surface.points, vertices, tris, tri_region))
         whole = single_patch_regions(vertices, tris, tri_region)[regions]
     labels = clean_labels(surface.points, projected, regions=regions)
     corners = known_corners(projected, labels, q_vertices, faces)
@@ -479,7 +484,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     if len(surface.points) > FIT_POINTS:
         pick = np.sort(np.random.default_rng(0).choice(len(surface.points), FIT_POINTS,
                                                        replace=False))
-        surface = dataclasses.replace(surface, points=surface.points[pick])
+        surface = dataclasses.replace(
+            surface, points=surface.points[pick],
+            point_triangles=None if surface.point_triangles is None else surface.point_triangles[pick])
         say(f"fitting a random {FIT_POINTS} of the {len(full.points)} points")
     if surface.triangles is None:
         say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")

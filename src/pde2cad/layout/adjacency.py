@@ -59,9 +59,11 @@ flattens.
 from __future__ import annotations
 
 import os
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from itertools import chain
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -522,19 +524,27 @@ def _local_graph(
     pts: NDArray[np.float64], tree: cKDTree, centres: NDArray[np.float64], reach: float,
     radius: float, k: int = GEODESIC_NEIGHBOURS,
 ) -> tuple[NDArray[np.int64], coo_matrix]:
-    """The cloud points within ``reach`` of any of ``centres`` and their k-NN graph (edges
-    at most ``radius`` long, both ways): its shortest paths run along the surface."""
+    """The cloud points within ``reach`` of any of ``centres`` (sorted) and their k-NN
+    graph (edges at most ``radius`` long, one way each: search it with ``directed=False``):
+    its shortest paths run along the surface.
+
+    Nothing here is as long as the cloud: a border's geodesic test runs this hundreds of
+    times on a layout of a hundred segments."""
     rows = tree.query_ball_point(centres, reach)
-    local = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in rows] + [np.zeros(0, np.int64)]))
-    at = np.full(len(pts), -1, dtype=np.int64)
-    at[local] = np.arange(len(local))
+    local = np.unique(np.fromiter(chain.from_iterable(rows), dtype=np.int64))
     dist, idx = tree.query(pts[local], k=min(k + 1, len(pts)), distance_upper_bound=radius)
-    ok = idx < len(pts)
-    j = np.where(ok, at[np.where(ok, idx, 0)], -1)
-    ok &= j >= 0
+    j = _local_index(local, idx)
+    ok = j >= 0
     i = np.repeat(np.arange(len(local)), idx.shape[1]).reshape(idx.shape)
-    graph = coo_matrix((dist[ok], (i[ok], j[ok])), shape=(len(local),) * 2)
-    return local, graph.maximum(graph.T).tocoo() if len(local) else graph
+    return local, coo_matrix((dist[ok], (i[ok], j[ok])), shape=(len(local),) * 2)
+
+
+def _local_index(local: NDArray[np.int64], ids: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Position of each of ``ids`` in the sorted ``local``, -1 where it is not there."""
+    if not len(local):
+        return np.full(np.shape(ids), -1, dtype=np.int64)
+    pos = np.minimum(np.searchsorted(local, ids), len(local) - 1)
+    return np.where(local[pos] == ids, pos, -1)
 
 
 def surface_distances(
@@ -551,13 +561,11 @@ def surface_distances(
         return out
     local, graph = _local_graph(pts, tree, pts[np.unique(sources)], reach, radius)
     csr = graph.tocsr()
-    at = np.full(len(pts), -1, dtype=np.int64)
-    at[local] = np.arange(len(local))
-    src, inverse = np.unique(at[sources], return_inverse=True)
-    dst = at[targets]
+    src, inverse = np.unique(_local_index(local, sources), return_inverse=True)
+    dst = _local_index(local, targets)
     for lo in range(0, len(src), GEODESIC_CHUNK):
         chunk = src[lo : lo + GEODESIC_CHUNK]
-        dist = dijkstra(csr, indices=chunk, limit=reach)
+        dist = dijkstra(csr, directed=False, indices=chunk, limit=reach)
         pick = (inverse >= lo) & (inverse < lo + len(chunk)) & (dst >= 0)
         out[pick] = dist[inverse[pick] - lo, dst[pick]]
     return out
@@ -598,14 +606,49 @@ def surface_reach(
         return []
     local, graph = _local_graph(pts, tree, centres, reach, radius)
     csr = graph.tocsr()
-    at = np.full(len(pts), -1, dtype=np.int64)
-    at[local] = np.arange(len(local))
     gap, seed = tree.query(centres)
+    start = _local_index(local, seed)
     out: list[NDArray[np.int64]] = []
     for lo in range(0, len(centres), GEODESIC_CHUNK):
-        dist = dijkstra(csr, indices=at[seed[lo : lo + GEODESIC_CHUNK]], limit=reach)
+        dist = dijkstra(csr, directed=False, indices=start[lo : lo + GEODESIC_CHUNK], limit=reach)
         out += [local[row + g <= reach] for row, g in zip(dist, gap[lo : lo + GEODESIC_CHUNK])]
     return out
+
+
+#: Spans of the borders of the last cloud laid out (:func:`_border_span`), and its digest.
+_SPANS: dict[tuple[float, bytes], float] = {}
+_SPANS_CLOUD: list[tuple[tuple[int, ...], int]] = []
+#: Spans kept at most (a layout of a few hundred segments has ~1000 borders).
+_SPANS_KEPT = 20_000
+
+
+def _span_memo(pts: NDArray[np.float64]) -> dict[tuple[float, bytes], float]:
+    """The kept border spans of ``pts`` (:func:`_border_span`): the split step lays out the
+    same cloud dozens of times with most borders unchanged, and a span depends on the
+    points alone. The cloud is known by a checksum of its coordinates (a few ms per
+    million points)."""
+    cloud = (pts.shape, zlib.crc32(np.ascontiguousarray(pts).tobytes()))
+    if _SPANS_CLOUD != [cloud] or len(_SPANS) > _SPANS_KEPT:
+        _SPANS.clear()
+        _SPANS_CLOUD[:] = [cloud]
+    return _SPANS
+
+
+def _border_span(
+    pts: NDArray[np.float64], tree: cKDTree, members: NDArray[np.int64], radius: float,
+    memo: dict[tuple[float, bytes], float],
+) -> float:
+    """Length of a border band (its points ``members``): the bounding-box diagonal of its
+    largest run (:func:`_run_span`), or where that is short, its length along the surface
+    (:func:`_surface_span`: a border curving round a fold, the teapot rim's seams, is longer
+    than its box); looked up in ``memo`` (:func:`_span_memo`) first."""
+    key = (radius, members.tobytes())
+    if key not in memo:
+        span = _run_span(pts[members], radius)
+        if span <= BORDER_SPAN * radius:
+            span = _surface_span(pts, tree, members, radius)
+        memo[key] = span
+    return memo[key]
 
 
 def _borders(
@@ -643,13 +686,11 @@ def _borders(
     weak: list[tuple[int, int]] = []
     edge_count = np.bincount(pair, minlength=n_lab * n_lab)
     starts = np.searchsorted(key_pair, np.arange(n_lab * n_lab + 1))
+    memo = _span_memo(pts)
     for p in np.flatnonzero(edge_count):
         members = key_pt[starts[p] : starts[p + 1]]
         border = pts[members]
-        span = _run_span(border, radius)
-        if span <= BORDER_SPAN * radius:
-            # A border curving round a fold (the teapot rim's seams) is longer than its box.
-            span = _surface_span(pts, tree, members, radius)
+        span = _border_span(pts, tree, members, radius, memo)
         a, b = int(present[p // n_lab]), int(present[p % n_lab])
         share, rise = _crossing(pts, tree, lab, members, a, b)
         if share < EDGE_SHARE:
@@ -727,9 +768,19 @@ def _one_sided(
     enough = (theirs.sum(axis=1) >= NORMAL_NEIGHBOURS // 2) & (mine.sum(axis=1) >= NORMAL_NEIGHBOURS // 2)
     if not enough.any():
         return share, 0.0
-    rise = np.nanmedian(np.where(theirs, slope, np.nan)[enough], axis=1)
-    base = np.nanmedian(np.where(mine, slope, np.nan)[enough], axis=1)
+    rise = _row_median(slope[enough], theirs[enough])
+    base = _row_median(slope[enough], mine[enough])
     return share, float(np.median(rise - base))
+
+
+def _row_median(values: NDArray[np.float64], mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """Per row, the median of the finite ``values`` where ``mask`` holds (each row has one):
+    ``np.nanmedian`` of the rows with NaN elsewhere, the same numbers without its
+    masked-array path (which cost more than the rest of :func:`_one_sided`)."""
+    ordered = np.sort(np.where(mask, values, np.inf), axis=1)
+    count = mask.sum(axis=1)
+    rows = np.arange(len(ordered))
+    return 0.5 * (ordered[rows, (count - 1) // 2] + ordered[rows, count // 2])
 
 
 # --------------------------------------------------------------------------- loops
