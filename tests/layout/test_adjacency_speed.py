@@ -114,20 +114,21 @@ def test_dense_cloud_corners() -> None:
     assert all(len(w) == 4 for w in layout.segment_corners.values())
 
 
-def test_a_second_layout_of_the_same_cloud_reuses_its_border_spans_and_equals_the_first() -> None:
-    """The split step lays out one cloud dozens of times; border spans are kept between
-    calls (by a checksum of the points), which must change nothing, and a moved cloud
-    must not reuse them."""
+def test_a_second_layout_of_the_same_cloud_reuses_what_it_kept_and_equals_the_first() -> None:
+    """The split step lays out one cloud dozens of times; border spans, crossing tests and
+    segment loops are kept between calls (by a checksum of the points), which must change
+    nothing, and a moved cloud must not reuse them."""
     import pde2cad.layout.adjacency as adjacency
 
     cloud = sphere6(n_points=12000, seed=4)
     first = build_layout(cloud.points, cloud.labels)
-    kept = dict(adjacency._SPANS)
-    assert kept, "the spans of the first layout are kept"
+    kept = dict(adjacency._MEMO)
+    kinds = {key[0] for key in kept}
+    assert kinds == {"span", "crossing", "loop"}, kinds
     again = build_layout(cloud.points.copy(), cloud.labels)
-    assert adjacency._SPANS == kept
+    assert adjacency._MEMO.keys() == kept.keys()
     assert again.adjacency == first.adjacency and np.array_equal(again.corners, first.corners)
     assert all(np.array_equal(again.borders[p], first.borders[p]) for p in first.borders)
     scaled = build_layout(cloud.points * 1.5, cloud.labels)
-    assert not set(adjacency._SPANS.values()) & set(kept.values())
+    assert not adjacency._MEMO.keys() & {k for k in kept if k[0] == "span"}
     assert scaled.adjacency == first.adjacency

@@ -64,6 +64,7 @@ from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from itertools import chain
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -615,45 +616,47 @@ def surface_reach(
     return out
 
 
-#: Spans of the borders of the last cloud laid out (:func:`_border_span`), and its digest.
-_SPANS: dict[tuple[float, bytes], float] = {}
-_SPANS_CLOUD: list[tuple[tuple[int, ...], int]] = []
-#: Spans kept at most (a layout of a few hundred segments has ~1000 borders).
-_SPANS_KEPT = 20_000
+#: What :func:`build_layout` keeps of the last cloud it laid out (:func:`cloud_memo`), and
+#: that cloud's digest.
+_MEMO: dict[tuple[object, ...], object] = {}
+_MEMO_CLOUD: list[tuple[tuple[int, ...], int]] = []
+#: Entries kept at most (a layout of a few hundred segments has ~1000 borders).
+_MEMO_KEPT = 20_000
 
 
-def _span_memo(pts: NDArray[np.float64]) -> dict[tuple[float, bytes], float]:
-    """The kept border spans of ``pts`` (:func:`_border_span`): the split step lays out the
-    same cloud dozens of times with most borders unchanged, and a span depends on the
-    points alone. The cloud is known by a checksum of its coordinates (a few ms per
-    million points)."""
+def cloud_memo(pts: NDArray[np.float64]) -> dict[tuple[object, ...], object]:
+    """Results kept for ``pts`` between layouts: the split step lays out the same cloud
+    dozens of times with most segments and borders unchanged. Each entry's key holds
+    everything its value depends on besides the points (see its user); the cloud is known
+    by a checksum of its coordinates (a few ms per million points)."""
     cloud = (pts.shape, zlib.crc32(np.ascontiguousarray(pts).tobytes()))
-    if _SPANS_CLOUD != [cloud] or len(_SPANS) > _SPANS_KEPT:
-        _SPANS.clear()
-        _SPANS_CLOUD[:] = [cloud]
-    return _SPANS
+    if _MEMO_CLOUD != [cloud] or len(_MEMO) > _MEMO_KEPT:
+        _MEMO.clear()
+        _MEMO_CLOUD[:] = [cloud]
+    return _MEMO
 
 
 def _border_span(
     pts: NDArray[np.float64], tree: cKDTree, members: NDArray[np.int64], radius: float,
-    memo: dict[tuple[float, bytes], float],
+    memo: dict[tuple[object, ...], object],
 ) -> float:
     """Length of a border band (its points ``members``): the bounding-box diagonal of its
     largest run (:func:`_run_span`), or where that is short, its length along the surface
     (:func:`_surface_span`: a border curving round a fold, the teapot rim's seams, is longer
-    than its box); looked up in ``memo`` (:func:`_span_memo`) first."""
-    key = (radius, members.tobytes())
+    than its box); looked up in ``memo`` (:func:`cloud_memo`; the points alone decide it)."""
+    key = ("span", radius, members.tobytes())
     if key not in memo:
         span = _run_span(pts[members], radius)
         if span <= BORDER_SPAN * radius:
             span = _surface_span(pts, tree, members, radius)
         memo[key] = span
-    return memo[key]
+    return cast(float, memo[key])
 
 
 def _borders(
     pts: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], present: NDArray[np.int64],
     near: NDArray[np.int64], idx: NDArray[np.int64], valid: NDArray[np.bool_], radius: float,
+    memo: dict[tuple[object, ...], object], digest: dict[int, int],
 ) -> tuple[dict[tuple[int, int], int], dict[tuple[int, int], NDArray[np.float64]],
            NDArray[np.bool_], list[tuple[int, int]], dict[tuple[int, int], tuple[int, NDArray[np.float64]]]]:
     """Step 2 of the module docstring: adjacency, border points and whether each point is one
@@ -686,13 +689,16 @@ def _borders(
     weak: list[tuple[int, int]] = []
     edge_count = np.bincount(pair, minlength=n_lab * n_lab)
     starts = np.searchsorted(key_pair, np.arange(n_lab * n_lab + 1))
-    memo = _span_memo(pts)
     for p in np.flatnonzero(edge_count):
         members = key_pt[starts[p] : starts[p + 1]]
         border = pts[members]
         span = _border_span(pts, tree, members, radius, memo)
         a, b = int(present[p // n_lab]), int(present[p % n_lab])
-        share, rise = _crossing(pts, tree, lab, members, a, b)
+        # The test sees the border points and which points are a's and b's, nothing else.
+        seen = ("crossing", members.tobytes(), digest[a], digest[b])
+        if seen not in memo:
+            memo[seen] = _crossing(pts, tree, lab, members, a, b)
+        share, rise = cast("tuple[float, float]", memo[seen])
         if share < EDGE_SHARE:
             weak.append((a, b))
         if share < EDGE_SHARE and rise >= EDGE_RISE:
@@ -919,6 +925,7 @@ def _loop_candidates(
     radius: float,
     tree: cKDTree | None = None,
     lab: NDArray[np.int64] | None = None,
+    memo: dict[tuple[object, ...], object] | None = None,
 ) -> tuple[
     NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_],
     NDArray[np.bool_], NDArray[np.int64],
@@ -927,14 +934,22 @@ def _loop_candidates(
 
     Returns indices into ``pts``: the open loop points (loop order), the (b) candidates, the
     (c) candidates (turns), whether each turn lies on the open boundary (not on a border),
-    whether it turns by CORNER_ANGLE at the coarse scale too, and the whole loop.
+    whether it turns by CORNER_ANGLE at the coarse scale too, and the whole loop. The frame
+    and the loop of a segment that is not folded depend on its points alone and are kept
+    in ``memo`` (:func:`cloud_memo`).
     """
-    origin, axes, folded = _frame(pts, members, tree)
-    uv = (pts[members] - origin) @ axes[:2].T
-    if folded and tree is not None and lab is not None:
-        unfolded = _unfold(pts, members, lab, tree, radius, axes[0], is_border)
-        uv = uv if unfolded is None else unfolded
-    local = boundary_loop(uv)
+    key = ("loop", members.tobytes())
+    if memo is not None and key in memo:
+        uv, local = cast("tuple[NDArray[np.float64], NDArray[np.int64]]", memo[key])
+    else:
+        origin, axes, folded = _frame(pts, members, tree)
+        uv = (pts[members] - origin) @ axes[:2].T
+        if folded and tree is not None and lab is not None:
+            unfolded = _unfold(pts, members, lab, tree, radius, axes[0], is_border)
+            uv = uv if unfolded is None else unfolded
+        local = boundary_loop(uv)
+        if memo is not None and not folded:
+            memo[key] = (uv, local)
     loop = members[local]
     n = len(loop)
     border = is_border[loop]
@@ -1032,6 +1047,11 @@ def build_layout(
     tree, spacing, radius = _neighbours(pts, k)
     vox = _voxels(pts, radius)
     _check_segments(lab, present, counts, vox, min_points)
+    memo = cloud_memo(pts)
+    order = np.argsort(lab, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    digest = {int(label): zlib.crc32(order[bounds[s] : bounds[s + 1]].tobytes())
+              for s, label in enumerate(present)}
 
     # k-NN only of the points that can have a neighbour of another label (near borders): the
     # cross edges and the (a) candidates are the same as from the k-NN of every point.
@@ -1040,7 +1060,7 @@ def build_layout(
     dist, idx = dist[:, 1:], idx[:, 1:].astype(np.int64)
     valid = dist <= radius
 
-    adjacency, borders, is_border, crossing, short = _borders(pts, tree, lab, present, near, idx, valid, radius)
+    adjacency, borders, is_border, crossing, short = _borders(pts, tree, lab, present, near, idx, valid, radius, memo, digest)
     weak = crossing[crossing.index((-1, -1)) + 1 :]
     crossing = crossing[: crossing.index((-1, -1))] + [
         (a, b) for a, b in known if a in present and b in present
@@ -1067,7 +1087,7 @@ def build_layout(
             loose[np.searchsorted(present, a), np.searchsorted(present, b)] = True
         cut |= (spread | spread.T) & (~adj | loose | loose.T)
         valid &= ~cut[rank[near][:, None], rank[idx]]
-        adjacency, borders, is_border, _, short = _borders(pts, tree, lab, present, near, idx, valid, radius)
+        adjacency, borders, is_border, _, short = _borders(pts, tree, lab, present, near, idx, valid, radius, memo, digest)
 
     # (a) points whose neighbourhood (with themselves) holds >= 3 labels ...
     own = lab[near]
@@ -1093,8 +1113,6 @@ def build_layout(
     junction = np.concatenate([junction, sparse])
 
     # (b), (c) and the open boundary from each segment's loop.
-    order = np.argsort(lab, kind="stable")
-    bounds = np.concatenate([[0], np.cumsum(counts)])
     open_boundary: dict[int, NDArray[np.float64]] = {}
     loops: dict[int, NDArray[np.int64]] = {}
 
@@ -1106,7 +1124,7 @@ def build_layout(
     ]:
         members = order[bounds[s] : bounds[s + 1]]  # increasing: the sort is stable
         try:
-            return _loop_candidates(pts, members, is_border, radius, tree, lab)
+            return _loop_candidates(pts, members, is_border, radius, tree, lab, memo)
         except InputError as exc:
             raise InputError(f"segment {int(present[s])}: {exc}") from exc
 
