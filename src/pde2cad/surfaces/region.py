@@ -45,6 +45,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.columns import centred_columns, column_max, column_min, scatter_matrix
 from pde2cad.surfaces.rim import (
     DENSITY_RANK,
     NOISE_DEPTH,
@@ -200,11 +201,14 @@ def pca_frame(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     InputError
         If the points are (nearly) collinear or coincident.
     """
-    origin = points.mean(axis=0)
-    centred = points - origin
+    origin, centred = centred_columns(points)
+    return origin, _pca_axes(centred)
+
+
+def _pca_axes(centred: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The axes of :func:`pca_frame` from the centred points, coordinate-major (3, N)."""
     # 3x3 covariance + eigh rather than an SVD of the (N, 3) data: same axes, far cheaper.
-    # einsum rather than @: a threaded BLAS call costs more than the sum on a loaded machine.
-    cov = np.einsum("ij,ik->jk", centred, centred) / len(points)
+    cov = scatter_matrix(centred) / centred.shape[1]
     values, vectors = np.linalg.eigh(cov)
     values, vectors = values[::-1], vectors[:, ::-1]
     if not values[0] > 0 or values[1] <= 1e-12 * values[0]:
@@ -215,7 +219,7 @@ def pca_frame(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     axes = vectors[:, :2].T.copy()
     flip = np.sign(axes[np.arange(2), np.abs(axes).argmax(axis=1)])
     axes *= flip[:, None]
-    return origin, np.vstack([axes, np.cross(axes[0], axes[1])])
+    return np.vstack([axes, np.cross(axes[0], axes[1])])
 
 
 # --------------------------------------------------------------------------- alpha shape
@@ -1161,9 +1165,9 @@ def _rim_band(
     edge = float(np.median(np.linalg.norm(after - loop_uv, axis=1)))
     step = min(edge, float(np.sqrt(area / len(uv))))
     cell = 0.5 * RIM_BAND * step
-    lo = uv.min(axis=0)
+    lo = column_min(uv)
     ij = np.floor((uv - lo) / cell).astype(np.int64)
-    dims = ij.max(axis=0) + 1
+    dims = column_max(ij) + 1
     mark = np.zeros(tuple(dims), dtype=bool)
     at = np.clip(np.floor((loop_uv - lo) / cell).astype(np.int64), 0, dims - 1)
     mark[at[:, 0], at[:, 1]] = True
@@ -1386,8 +1390,10 @@ def extract_boundary(
     pts = _as_points(points, 3, "points")
     if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be a positive number, got {tolerance}")
-    origin, axes = pca_frame(pts)
-    uv = np.einsum("ij,kj->ik", pts - origin, axes[:2])  # einsum: no threaded BLAS call
+    origin, centred = centred_columns(pts)
+    axes = _pca_axes(centred)
+    # A transposed view of (2, N): each coordinate stays one contiguous row.
+    uv = (axes[:2] @ centred).T
     if alpha is None and len(pts) > 2 * SAMPLE_POINTS:
         loop_index = sampled_loop(uv)
     else:
@@ -1420,7 +1426,7 @@ def extract_boundary(
         )
     closed = np.vstack([loop, loop[:1]])
     runs = [closed[a : b + 1] for a, b in zip(ends[:-1], ends[1:])]
-    diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    diagonal = float(np.linalg.norm(column_max(pts) - column_min(pts)))
     tol = _noise_tolerance(runs, diagonal) if tolerance is None else float(tolerance)
     c = len(cidx)
     sides: list[PiecewiseBezier] = []
