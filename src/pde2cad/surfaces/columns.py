@@ -10,17 +10,19 @@ to report them.)
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
 
-def column_min(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Smallest value of every column of ``points`` (N, D), N >= 1: (D,)."""
+def column_min(points: NDArray[Any]) -> NDArray[Any]:
+    """Smallest value of every column of ``points`` (N, D), N >= 1: (D,), same dtype."""
     return np.array([points[:, k].min() for k in range(points.shape[1])])
 
 
-def column_max(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Largest value of every column of ``points`` (N, D), N >= 1: (D,)."""
+def column_max(points: NDArray[Any]) -> NDArray[Any]:
+    """Largest value of every column of ``points`` (N, D), N >= 1: (D,), same dtype."""
     return np.array([points[:, k].max() for k in range(points.shape[1])])
 
 
