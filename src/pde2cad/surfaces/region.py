@@ -111,7 +111,8 @@ NOISE_FACTOR = 3.0
 TOLERANCE_FLOOR = 1e-4
 #: Width of the band of points the rim estimate gets, in mean sample spacings (it reaches
 #: RIM_BAND / 2 .. 3 RIM_BAND / 2 from the loop; the windows reach RIM_DEPTH = 4 spacings or
-#: NOISE_DEPTH = 4 noise sigmas, plus 2 spacings; deeper windows get all the points).
+#: NOISE_DEPTH = 4 noise sigmas, plus 2 spacings; deeper windows get a wider band, see
+#: _relocate_rims).
 RIM_BAND = 20.0
 #: Loop points within this RMS distance (in sample spacings) of their fitted side are a
 #: sampled rim (structured data), whose sides stay on them (see _sampled_rim).
@@ -1149,7 +1150,7 @@ def _rim_side(
 
 
 def _rim_band(
-    uv: NDArray[np.float64], loop_uv: NDArray[np.float64]
+    uv: NDArray[np.float64], loop_uv: NDArray[np.float64], reach: float = 0.0
 ) -> tuple[NDArray[np.bool_], float]:
     """Which points lie within about RIM_BAND sample spacings of the loop (in the projection
     plane, on a grid of cells half that wide): all the rim estimate reads (its windows reach
@@ -1157,6 +1158,7 @@ def _rim_band(
     never goes into a KD-tree. The spacing is the mean one, ``sqrt(area / N)`` inside the
     loop, or the loop's median edge if shorter (the refined loop of a large cloud has
     edges of 2-3 spacings, and a band in its edges held 30 % of a 1e6-point cloud).
+    ``reach``: the band reaches at least this far (windows deeper than the default band).
 
     Returns the mask and the least distance from the loop to the band's edge (a cell).
     """
@@ -1164,7 +1166,7 @@ def _rim_band(
     area = 0.5 * abs(float(np.sum(loop_uv[:, 0] * after[:, 1] - after[:, 0] * loop_uv[:, 1])))
     edge = float(np.median(np.linalg.norm(after - loop_uv, axis=1)))
     step = min(edge, float(np.sqrt(area / len(uv))))
-    cell = 0.5 * RIM_BAND * step
+    cell = max(0.5 * RIM_BAND * step, reach)
     lo = column_min(uv)
     ij = np.floor((uv - lo) / cell).astype(np.int64)
     dims = column_max(ij) + 1
@@ -1245,7 +1247,7 @@ def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float
 
 def _relocate_rims(
     pts: NDArray[np.float64],
-    band: tuple[NDArray[np.bool_], float],
+    plane: tuple[NDArray[np.float64], NDArray[np.float64]],
     runs: list[NDArray[np.float64]],
     sides: list[PiecewiseBezier],
     loop_errors: NDArray[np.float64],
@@ -1253,10 +1255,14 @@ def _relocate_rims(
     fixed: bool,
     tolerance: float | None,
     diagonal: float,
+    reach: float = 0.0,
 ) -> tuple[list[PiecewiseBezier], NDArray[np.float64], float] | None:
     """Sides on the true rim (:mod:`pde2cad.surfaces.rim`) instead of the boundary loop,
-    from the points near it (``band``: which, and how far from the loop they reach at
-    least, see :func:`_rim_band`; all points when the noise needs deeper windows).
+    from the points near it: the band of :func:`_rim_band` around the loop, ``plane`` =
+    (points, loop) in the projection plane, reaching at least ``reach`` (inf: all points).
+    Windows deeper than the band (noise of several spacings, or sides sparser than the
+    cloud's mean spacing) get a band 1.5 times their depth, the margin for the spacing
+    estimate of the wider band; all points if that is still too shallow.
 
     1. Rim points along every side from the samples near it (:func:`locate_rim`); a side too
        short for a station keeps its loop points.
@@ -1271,6 +1277,9 @@ def _relocate_rims(
     Returns the sides, their fit errors and the tolerance; None when no side has a rim to
     move (all too short, or sampled rows).
     """
+    band = (np.ones(len(pts), dtype=bool), np.inf) if reach == np.inf else _rim_band(
+        *plane, reach
+    )
     # Duplicates would halve the spacing estimates and double the windows' counts: a
     # doubled cloud must give the same rims.
     cloud, pts = pts, np.unique(pts[band[0]], axis=0)
@@ -1279,9 +1288,21 @@ def _relocate_rims(
     spacings = [_side_spacing(tree, run, band_spacing) for run in runs]
     c = len(sides)
     # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
+    sampled = [_sampled_rim(run, side, gap) for run, side, gap in zip(runs, sides, spacings)]
+    # Windows at least RIM_DEPTH + 2 spacings deep: a band known to be too narrow is widened
+    # before any rim is estimated in it (sides sparser than the cloud's mean).
+    shallowest = max(
+        ((RIM_DEPTH + 2.0) * gap for gap, row in zip(spacings, sampled) if not row), default=0.0
+    )
+    if shallowest > band[1]:
+        wider = 1.5 * shallowest if reach == 0.0 else np.inf
+        return _relocate_rims(
+            cloud, plane, runs, sides, loop_errors, corners, fixed, tolerance, diagonal, wider
+        )
+
     def rim_of(k: int) -> RimEstimate | None:
         run, side, gap = runs[k], sides[k], spacings[k]
-        return None if _sampled_rim(run, side, gap) else locate_rim(pts, side, gap, tree)
+        return None if sampled[k] else locate_rim(pts, side, gap, tree)
 
     # The sides on threads: numpy and the KD-tree release the GIL in their loops.
     with ThreadPoolExecutor(max_workers=min(c, os.cpu_count() or 1)) as pool:
@@ -1291,11 +1312,11 @@ def _relocate_rims(
         max(RIM_DEPTH * gap, NOISE_DEPTH * float(np.median(r.noise))) + 2.0 * gap
         for r, gap in zip(rims, spacings) if r is not None
     ]
-    if max(depth, default=0.0) > band[1]:
-        # Windows deeper than the band (noise of several spacings): all the points.
-        every = np.ones(len(cloud), dtype=bool), np.inf
+    deepest = max(depth, default=0.0)
+    if deepest > band[1]:
+        wider = 1.5 * deepest if reach == 0.0 else np.inf
         return _relocate_rims(
-            cloud, every, runs, sides, loop_errors, corners, fixed, tolerance, diagonal
+            cloud, plane, runs, sides, loop_errors, corners, fixed, tolerance, diagonal, wider
         )
     if all(r is None for r in rims):
         return None
@@ -1436,9 +1457,9 @@ def extract_boundary(
         sides.append(side)
     if rims:
         given = None if tolerance is None else float(tolerance)
-        band = _rim_band(uv, uv[loop_index])
         moved = _relocate_rims(
-            pts, band, runs, sides, errors, cpos, corners is not None, given, diagonal
+            pts, (uv, uv[loop_index]), runs, sides, errors, cpos, corners is not None, given,
+            diagonal,
         )
         if moved is not None:
             sides, errors, tol = moved
