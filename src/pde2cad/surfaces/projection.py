@@ -244,7 +244,7 @@ class _StartTable:
         self.lo, self.scale, self.dims = lo, 1.0 / size, dims
         axes = [lo[k] + size * (np.arange(dims[k]) + 0.5) for k in range(len(dims))]
         centres = np.stack([a.reshape(-1) for a in np.meshgrid(*axes, indexing="ij")], axis=1)
-        self.nearest = tree.query(centres)[1].astype(np.int64)
+        self.nearest = tree.query(centres, workers=-1)[1].astype(np.int64)
         self.strides = np.r_[np.cumprod(dims[::-1])[::-1][1:], 1].astype(np.int64)
 
     @classmethod

@@ -239,7 +239,7 @@ def _spacing(points2d: NDArray[np.float64], queries: int, tree: cKDTree | None =
     if tree is None:
         # An unbalanced tree builds ~2x faster; nearest distances are the same.
         tree = cKDTree(points2d, balanced_tree=False, compact_nodes=False)
-    dist, _ = tree.query(points2d[:: max(1, len(points2d) // queries)], k=4)
+    dist, _ = tree.query(points2d[:: max(1, len(points2d) // queries)], k=4, workers=-1)
     # First positive neighbour distance of each query point: duplicates give zeros.
     positive = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1)
     positive = positive[np.isfinite(positive)]
@@ -574,7 +574,7 @@ def refine_loop(
     tangent = np.roll(centres, -2, axis=0) - np.roll(centres, 2, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-300)[:, None]
     outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    _, near = cKDTree(centres).query(cand)
+    _, near = cKDTree(centres).query(cand, workers=-1)
     rel = cand - centres[near]
     offset = np.einsum("ij,ij->i", rel, outward[near])
     order = np.lexsort((offset, near))
