@@ -554,16 +554,18 @@ def _accumulate(
     formed: ``A^T r`` comes from the separable factors.
     """
     tu, tv = _top_frequency(m, kind), _top_frequency(n, kind)
-    # Coordinate-major copies: every later operation then runs along contiguous rows.
-    rt, pt = np.ascontiguousarray(r.T), np.ascontiguousarray(p.T)
     trig = np.empty((4, r.shape[0]))
 
     def chunk(part: slice) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        _angle_trig(pt[0, part], kind, trig[0:2, part])
-        _angle_trig(pt[1, part], kind, trig[2:4, part])
+        # Coordinate-major copies per chunk (on its thread): every later operation then
+        # runs along contiguous rows.
+        pt = np.ascontiguousarray(p[part].T)
+        _angle_trig(pt[0], kind, trig[0:2, part])
+        _angle_trig(pt[1], kind, trig[2:4, part])
         fu, cu = _chunk_basis(trig[0:2, part], m, kind, tu)
         fv, cv = _chunk_basis(trig[2:4, part], n, kind, tv)
-        return cu[: tu + 1] @ cv[: tv + 1].T, _project_residuals(fu, fv, rt[:, part])
+        rt = np.ascontiguousarray(r[part].T)
+        return cu[: tu + 1] @ cv[: tv + 1].T, _project_residuals(fu, fv, rt)
 
     parts = _chunk_map(chunk, r.shape[0])
     moments = np.sum([a for a, _ in parts], axis=0)
@@ -584,13 +586,12 @@ def _residual_pass(
     m, n, dim = coef.shape
     norms = np.empty(r.shape[0])
     flat = coef.reshape(m, n * dim).T  # (N D, M)
-    rt = np.ascontiguousarray(r.T)
 
     def chunk(part: slice) -> NDArray[np.float64] | None:
         fu, _ = _chunk_basis(trig[0:2, part], m, kind)
         fv, _ = _chunk_basis(trig[2:4, part], n, kind)
         inner = (flat @ fu).reshape(n, dim, -1)  # sum_m a_mn f_m(u_i)
-        left = rt[:, part] - np.einsum("nc,ndc->dc", fv, inner)
+        left = r[part].T - np.einsum("nc,ndc->dc", fv, inner)
         norms[part] = np.sqrt(np.einsum("dc,dc->c", left, left))  # disjoint slices
         return _project_residuals(fu, fv, left) if normal else None
 

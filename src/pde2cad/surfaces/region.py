@@ -1413,8 +1413,9 @@ def extract_boundary(
         raise InputError(f"tolerance must be a positive number, got {tolerance}")
     origin, centred = centred_columns(pts)
     axes = _pca_axes(centred)
-    # A transposed view of (2, N): each coordinate stays one contiguous row.
-    uv = (axes[:2] @ centred).T
+    # A transposed view of (2, N): each coordinate stays one contiguous row. einsum, not @:
+    # a threaded BLAS call costs more than the sum on a loaded machine.
+    uv = np.einsum("ij,jk->ik", axes[:2], centred).T
     if alpha is None and len(pts) > 2 * SAMPLE_POINTS:
         loop_index = sampled_loop(uv)
     else:
