@@ -49,3 +49,18 @@ def scatter_matrix(centred: NDArray[np.float64]) -> NDArray[np.float64]:
     """
     return np.einsum("ik,jk->ij", centred, centred)
 
+
+
+def unique_rows(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.unique(points, axis=0)`` of (N, D) float rows, N >= 1: the distinct rows in
+    lexicographic order.
+
+    np.unique sorts the rows as structured records (70k rows: 55 ms). When no two rows
+    share their first coordinate (scanned and random clouds, unless duplicated) the rows
+    sorted by it are already that answer (9 ms); otherwise np.unique decides.
+    """
+    order = np.argsort(points[:, 0], kind="stable")
+    rows = points[order]
+    if (np.diff(rows[:, 0]) == 0.0).any():
+        return np.unique(points, axis=0)
+    return rows

@@ -45,7 +45,13 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
-from pde2cad.surfaces.columns import centred_columns, column_max, column_min, scatter_matrix
+from pde2cad.surfaces.columns import (
+    centred_columns,
+    column_max,
+    column_min,
+    scatter_matrix,
+    unique_rows,
+)
 from pde2cad.surfaces.rim import (
     DENSITY_RANK,
     NOISE_DEPTH,
@@ -1282,7 +1288,7 @@ def _relocate_rims(
     )
     # Duplicates would halve the spacing estimates and double the windows' counts: a
     # doubled cloud must give the same rims.
-    cloud, pts = pts, np.unique(pts[band[0]], axis=0)
+    cloud, pts = pts, unique_rows(pts[band[0]])
     tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)  # builds ~2x faster
     band_spacing = sample_spacing(pts, tree)
     spacings = [_side_spacing(tree, run, band_spacing) for run in runs]
