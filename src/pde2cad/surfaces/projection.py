@@ -111,21 +111,24 @@ def _solve_step(
     With ``bounded``, a coordinate sitting on a side of [0, 1]^2 whose gradient pushes it out
     is frozen and the step taken in the other one (a projected Newton step).
     """
-    gu, gv = grad[0].copy(), grad[1].copy()
-    a, b, c = hess[0].copy(), hess[1].copy(), hess[2].copy()
+    gu, gv = grad
+    a, b, c = hess
     # The tiny floor keeps the system solvable where a side degenerates to a point (S_u = 0).
     damp = (mu + 1e-12) * (0.5 * (a + c)) + 1e-300
-    a += damp
-    c += damp
+    a, c = a + damp, c + damp
     if bounded:
         u, v = uv
         fix_u = ((u <= 0.0) & (gu > 0)) | ((u >= 1.0) & (gu < 0))
         fix_v = ((v <= 0.0) & (gv > 0)) | ((v >= 1.0) & (gv < 0))
-        gu[fix_u], gv[fix_v] = 0.0, 0.0
-        b[fix_u | fix_v] = 0.0
+        if fix_u.any() or fix_v.any():  # most points lie inside: no copies for them
+            gu, gv = np.where(fix_u, 0.0, gu), np.where(fix_v, 0.0, gv)
+            b = np.where(fix_u | fix_v, 0.0, b)
     det = a * c - b * b
     det = np.where(det > 0, det, np.inf)  # no descent information: stay put
-    return np.stack([-(c * gu - b * gv) / det, -(a * gv - b * gu) / det])
+    step = np.empty((2, det.size))
+    np.divide(c * gu - b * gv, det, out=step[0])
+    np.divide(a * gv - b * gu, det, out=step[1])
+    return np.negative(step, out=step)
 
 
 def _taylor_step(state: dict[str, NDArray[Any]], step: NDArray[np.float64]) -> None:
