@@ -199,6 +199,8 @@ _RULED_TERMS = (
 )
 
 
+#: Largest block of points a jet evaluates at once (bounds its per-point coefficients).
+_JET_BLOCK = 65_536
 #: Scattered evaluations of at least this many points use the polynomial cells.
 _CELL_MIN = 4096
 
@@ -396,6 +398,18 @@ class _BooleanSumPatch:
         shape = np.broadcast_shapes(u.shape, v.shape)
         u = np.broadcast_to(u, shape).reshape(-1)
         v = np.broadcast_to(v, shape).reshape(-1)
+        if u.size <= _JET_BLOCK:
+            out = self._flat_jet(u, v)
+        else:
+            # Blocks bound the per-point cell coefficients (12-16 D values a point).
+            out = np.empty((len(_JET_ORDERS), self.dim, u.size))
+            for start in range(0, u.size, _JET_BLOCK):
+                part = slice(start, start + _JET_BLOCK)
+                out[:, :, part] = self._flat_jet(u[part], v[part])
+        return tuple(o.T.reshape((*shape, self.dim)) for o in out)
+
+    def _flat_jet(self, u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`jet` at flat ``u, v`` (n,), coordinate-major: (6, D, n)."""
         ub, vb, coef = self.power_cells()
         nu, nv = coef.shape[:2]
         iu = np.clip(np.searchsorted(ub, u, side="right") - 1, 0, nu - 1)
@@ -413,8 +427,7 @@ class _BooleanSumPatch:
             # scheme per cell cost 5-8x more: ~60 numpy calls per cell on short runs.)
             table = coef.reshape(nu * nv, -1).T  # (terms D, cells)
             mine = np.take(table, iu * nv + iv, axis=1).reshape(*coef.shape[2:], -1)
-        out = _ruled_cell_jet(mine, x, y) if ruled else _cell_jet(mine, x, y)
-        return tuple(o.T.reshape((*shape, self.dim)) for o in out)
+        return _ruled_cell_jet(mine, x, y) if ruled else _cell_jet(mine, x, y)
 
 
 class BilinearCoons(_BooleanSumPatch):
