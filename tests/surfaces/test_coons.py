@@ -261,6 +261,21 @@ def test_jet_on_polynomial_cells_equals_the_boolean_sum(kind: str) -> None:
         np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-11)
 
 
+def test_jet_of_many_points_equals_the_jets_of_their_parts() -> None:
+    """Large calls run in blocks (bounding the per-point cell coefficients): the values
+    must be those of small calls, bit for bit, on ruled (bilinear) and full (bicubic) cells."""
+    bottom, right, top, left = _chain_sides()
+    for patch in (
+        BilinearCoons(bottom, right, top, left),
+        BicubicCoons(bottom, right, top, left, *RNG.normal(size=(4, 4, 3))),
+    ):
+        u, v = RNG.random(140_000), RNG.random(140_000)
+        whole = patch.jet(u, v)
+        parts = [patch.jet(a, b) for a, b in zip(np.array_split(u, 7), np.array_split(v, 7))]
+        for k, fast in enumerate(whole):
+            np.testing.assert_array_equal(fast, np.concatenate([p[k] for p in parts]))
+
+
 # ------------------------------------------------------------------------- bicubic (Eqs. 5.2-5.7)
 def test_bicubic_reproduces_a_bicubic_tensor_patch() -> None:
     net = _tensor_patch()

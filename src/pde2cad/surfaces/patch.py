@@ -48,6 +48,7 @@ from pde2cad.surfaces.coons import (
     estimate_cross_derivatives,
     three_sided,
 )
+from pde2cad.surfaces.columns import centred_columns, scatter_matrix
 from pde2cad.surfaces.deformation import (
     AUTO_TERMS,
     Deformation,
@@ -249,8 +250,9 @@ def _check_points(points: ArrayLike) -> NDArray[np.float64]:
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise InputError(f"points must have shape (N, 3), got {pts.shape}")
-    finite = np.isfinite(pts).all(axis=1)
-    if not finite.all():
+    # One pass over the whole array; the rows only to name the bad ones.
+    if not np.isfinite(pts).all():
+        finite = np.isfinite(pts).all(axis=1)
         bad = int(np.count_nonzero(~finite))
         raise InputError(
             f"{bad} of {pts.shape[0]} points contain NaN or inf (first at row "
@@ -258,10 +260,9 @@ def _check_points(points: ArrayLike) -> NDArray[np.float64]:
         )
     if pts.shape[0] < 3:
         raise InputError(f"a patch needs at least 3 points, got {pts.shape[0]}")
-    sample = pts[:: max(1, pts.shape[0] // _SHAPE_SAMPLE)]
-    centred = sample - sample.mean(axis=0)
-    # Principal spreads from the 3 x 3 scatter matrix (einsum: no threaded BLAS call).
-    scatter = np.einsum("ij,ik->jk", centred, centred)
+    _, centred = centred_columns(pts[:: max(1, pts.shape[0] // _SHAPE_SAMPLE)])
+    # Principal spreads from the 3 x 3 scatter matrix.
+    scatter = scatter_matrix(centred)
     spread = np.sqrt(np.clip(np.linalg.eigvalsh(scatter)[::-1], 0.0, None))
     if spread[0] == 0.0:
         raise InputError("all points coincide; a patch needs points spread over a surface")

@@ -45,6 +45,13 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 from pde2cad.curves.piecewise import denoise, fit_chain
 from pde2cad.errors import FitError, InputError
 from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.columns import (
+    centred_columns,
+    column_max,
+    column_min,
+    scatter_matrix,
+    unique_rows,
+)
 from pde2cad.surfaces.rim import (
     DENSITY_RANK,
     NOISE_DEPTH,
@@ -110,7 +117,8 @@ NOISE_FACTOR = 3.0
 TOLERANCE_FLOOR = 1e-4
 #: Width of the band of points the rim estimate gets, in mean sample spacings (it reaches
 #: RIM_BAND / 2 .. 3 RIM_BAND / 2 from the loop; the windows reach RIM_DEPTH = 4 spacings or
-#: NOISE_DEPTH = 4 noise sigmas, plus 2 spacings; deeper windows get all the points).
+#: NOISE_DEPTH = 4 noise sigmas, plus 2 spacings; deeper windows get a wider band, see
+#: _relocate_rims).
 RIM_BAND = 20.0
 #: Loop points within this RMS distance (in sample spacings) of their fitted side are a
 #: sampled rim (structured data), whose sides stay on them (see _sampled_rim).
@@ -200,11 +208,14 @@ def pca_frame(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     InputError
         If the points are (nearly) collinear or coincident.
     """
-    origin = points.mean(axis=0)
-    centred = points - origin
+    origin, centred = centred_columns(points)
+    return origin, _pca_axes(centred)
+
+
+def _pca_axes(centred: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The axes of :func:`pca_frame` from the centred points, coordinate-major (3, N)."""
     # 3x3 covariance + eigh rather than an SVD of the (N, 3) data: same axes, far cheaper.
-    # einsum rather than @: a threaded BLAS call costs more than the sum on a loaded machine.
-    cov = np.einsum("ij,ik->jk", centred, centred) / len(points)
+    cov = scatter_matrix(centred) / centred.shape[1]
     values, vectors = np.linalg.eigh(cov)
     values, vectors = values[::-1], vectors[:, ::-1]
     if not values[0] > 0 or values[1] <= 1e-12 * values[0]:
@@ -215,7 +226,7 @@ def pca_frame(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     axes = vectors[:, :2].T.copy()
     flip = np.sign(axes[np.arange(2), np.abs(axes).argmax(axis=1)])
     axes *= flip[:, None]
-    return origin, np.vstack([axes, np.cross(axes[0], axes[1])])
+    return np.vstack([axes, np.cross(axes[0], axes[1])])
 
 
 # --------------------------------------------------------------------------- alpha shape
@@ -234,7 +245,7 @@ def _spacing(points2d: NDArray[np.float64], queries: int, tree: cKDTree | None =
     if tree is None:
         # An unbalanced tree builds ~2x faster; nearest distances are the same.
         tree = cKDTree(points2d, balanced_tree=False, compact_nodes=False)
-    dist, _ = tree.query(points2d[:: max(1, len(points2d) // queries)], k=4)
+    dist, _ = tree.query(points2d[:: max(1, len(points2d) // queries)], k=4, workers=-1)
     # First positive neighbour distance of each query point: duplicates give zeros.
     positive = np.where(dist[:, 1:] > 0, dist[:, 1:], np.inf).min(axis=1)
     positive = positive[np.isfinite(positive)]
@@ -569,7 +580,7 @@ def refine_loop(
     tangent = np.roll(centres, -2, axis=0) - np.roll(centres, 2, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-300)[:, None]
     outward = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    _, near = cKDTree(centres).query(cand)
+    _, near = cKDTree(centres).query(cand, workers=-1)
     rel = cand - centres[near]
     offset = np.einsum("ij,ij->i", rel, outward[near])
     order = np.lexsort((offset, near))
@@ -1145,7 +1156,7 @@ def _rim_side(
 
 
 def _rim_band(
-    uv: NDArray[np.float64], loop_uv: NDArray[np.float64]
+    uv: NDArray[np.float64], loop_uv: NDArray[np.float64], reach: float = 0.0
 ) -> tuple[NDArray[np.bool_], float]:
     """Which points lie within about RIM_BAND sample spacings of the loop (in the projection
     plane, on a grid of cells half that wide): all the rim estimate reads (its windows reach
@@ -1153,6 +1164,7 @@ def _rim_band(
     never goes into a KD-tree. The spacing is the mean one, ``sqrt(area / N)`` inside the
     loop, or the loop's median edge if shorter (the refined loop of a large cloud has
     edges of 2-3 spacings, and a band in its edges held 30 % of a 1e6-point cloud).
+    ``reach``: the band reaches at least this far (windows deeper than the default band).
 
     Returns the mask and the least distance from the loop to the band's edge (a cell).
     """
@@ -1160,10 +1172,10 @@ def _rim_band(
     area = 0.5 * abs(float(np.sum(loop_uv[:, 0] * after[:, 1] - after[:, 0] * loop_uv[:, 1])))
     edge = float(np.median(np.linalg.norm(after - loop_uv, axis=1)))
     step = min(edge, float(np.sqrt(area / len(uv))))
-    cell = 0.5 * RIM_BAND * step
-    lo = uv.min(axis=0)
+    cell = max(0.5 * RIM_BAND * step, reach)
+    lo = column_min(uv)
     ij = np.floor((uv - lo) / cell).astype(np.int64)
-    dims = ij.max(axis=0) + 1
+    dims = column_max(ij) + 1
     mark = np.zeros(tuple(dims), dtype=bool)
     at = np.clip(np.floor((loop_uv - lo) / cell).astype(np.int64), 0, dims - 1)
     mark[at[:, 0], at[:, 1]] = True
@@ -1241,7 +1253,7 @@ def _sampled_rim(run: NDArray[np.float64], side: PiecewiseBezier, spacing: float
 
 def _relocate_rims(
     pts: NDArray[np.float64],
-    band: tuple[NDArray[np.bool_], float],
+    plane: tuple[NDArray[np.float64], NDArray[np.float64]],
     runs: list[NDArray[np.float64]],
     sides: list[PiecewiseBezier],
     loop_errors: NDArray[np.float64],
@@ -1249,10 +1261,14 @@ def _relocate_rims(
     fixed: bool,
     tolerance: float | None,
     diagonal: float,
+    reach: float = 0.0,
 ) -> tuple[list[PiecewiseBezier], NDArray[np.float64], float] | None:
     """Sides on the true rim (:mod:`pde2cad.surfaces.rim`) instead of the boundary loop,
-    from the points near it (``band``: which, and how far from the loop they reach at
-    least, see :func:`_rim_band`; all points when the noise needs deeper windows).
+    from the points near it: the band of :func:`_rim_band` around the loop, ``plane`` =
+    (points, loop) in the projection plane, reaching at least ``reach`` (inf: all points).
+    Windows deeper than the band (noise of several spacings, or sides sparser than the
+    cloud's mean spacing) get a band 1.5 times their depth, the margin for the spacing
+    estimate of the wider band; all points if that is still too shallow.
 
     1. Rim points along every side from the samples near it (:func:`locate_rim`); a side too
        short for a station keeps its loop points.
@@ -1267,17 +1283,32 @@ def _relocate_rims(
     Returns the sides, their fit errors and the tolerance; None when no side has a rim to
     move (all too short, or sampled rows).
     """
+    band = (np.ones(len(pts), dtype=bool), np.inf) if reach == np.inf else _rim_band(
+        *plane, reach
+    )
     # Duplicates would halve the spacing estimates and double the windows' counts: a
     # doubled cloud must give the same rims.
-    cloud, pts = pts, np.unique(pts[band[0]], axis=0)
+    cloud, pts = pts, unique_rows(pts[band[0]])
     tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)  # builds ~2x faster
     band_spacing = sample_spacing(pts, tree)
     spacings = [_side_spacing(tree, run, band_spacing) for run in runs]
     c = len(sides)
     # A side whose rim is sampled (structured data) keeps the loop points, which lie on it.
+    sampled = [_sampled_rim(run, side, gap) for run, side, gap in zip(runs, sides, spacings)]
+    # Windows at least RIM_DEPTH + 2 spacings deep: a band known to be too narrow is widened
+    # before any rim is estimated in it (sides sparser than the cloud's mean).
+    shallowest = max(
+        ((RIM_DEPTH + 2.0) * gap for gap, row in zip(spacings, sampled) if not row), default=0.0
+    )
+    if shallowest > band[1]:
+        wider = 1.5 * shallowest if reach == 0.0 else np.inf
+        return _relocate_rims(
+            cloud, plane, runs, sides, loop_errors, corners, fixed, tolerance, diagonal, wider
+        )
+
     def rim_of(k: int) -> RimEstimate | None:
         run, side, gap = runs[k], sides[k], spacings[k]
-        return None if _sampled_rim(run, side, gap) else locate_rim(pts, side, gap, tree)
+        return None if sampled[k] else locate_rim(pts, side, gap, tree)
 
     # The sides on threads: numpy and the KD-tree release the GIL in their loops.
     with ThreadPoolExecutor(max_workers=min(c, os.cpu_count() or 1)) as pool:
@@ -1287,11 +1318,11 @@ def _relocate_rims(
         max(RIM_DEPTH * gap, NOISE_DEPTH * float(np.median(r.noise))) + 2.0 * gap
         for r, gap in zip(rims, spacings) if r is not None
     ]
-    if max(depth, default=0.0) > band[1]:
-        # Windows deeper than the band (noise of several spacings): all the points.
-        every = np.ones(len(cloud), dtype=bool), np.inf
+    deepest = max(depth, default=0.0)
+    if deepest > band[1]:
+        wider = 1.5 * deepest if reach == 0.0 else np.inf
         return _relocate_rims(
-            cloud, every, runs, sides, loop_errors, corners, fixed, tolerance, diagonal
+            cloud, plane, runs, sides, loop_errors, corners, fixed, tolerance, diagonal, wider
         )
     if all(r is None for r in rims):
         return None
@@ -1386,8 +1417,11 @@ def extract_boundary(
     pts = _as_points(points, 3, "points")
     if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance must be a positive number, got {tolerance}")
-    origin, axes = pca_frame(pts)
-    uv = np.einsum("ij,kj->ik", pts - origin, axes[:2])  # einsum: no threaded BLAS call
+    origin, centred = centred_columns(pts)
+    axes = _pca_axes(centred)
+    # A transposed view of (2, N): each coordinate stays one contiguous row. einsum, not @:
+    # a threaded BLAS call costs more than the sum on a loaded machine.
+    uv = np.einsum("ij,jk->ik", axes[:2], centred).T
     if alpha is None and len(pts) > 2 * SAMPLE_POINTS:
         loop_index = sampled_loop(uv)
     else:
@@ -1420,7 +1454,7 @@ def extract_boundary(
         )
     closed = np.vstack([loop, loop[:1]])
     runs = [closed[a : b + 1] for a, b in zip(ends[:-1], ends[1:])]
-    diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    diagonal = float(np.linalg.norm(column_max(pts) - column_min(pts)))
     tol = _noise_tolerance(runs, diagonal) if tolerance is None else float(tolerance)
     c = len(cidx)
     sides: list[PiecewiseBezier] = []
@@ -1430,9 +1464,9 @@ def extract_boundary(
         sides.append(side)
     if rims:
         given = None if tolerance is None else float(tolerance)
-        band = _rim_band(uv, uv[loop_index])
         moved = _relocate_rims(
-            pts, band, runs, sides, errors, cpos, corners is not None, given, diagonal
+            pts, (uv, uv[loop_index]), runs, sides, errors, cpos, corners is not None, given,
+            diagonal,
         )
         if moved is not None:
             sides, errors, tol = moved

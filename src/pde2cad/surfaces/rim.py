@@ -112,7 +112,7 @@ def sample_spacing(points: NDArray[np.float64], tree: cKDTree | None = None) -> 
     tree = cKDTree(points) if tree is None else tree
     query = points[:: max(1, len(points) // _DENSITY_SAMPLE)]
     k = min(DENSITY_RANK, len(points) - 1)
-    dist, _ = tree.query(query, k=k + 1)
+    dist, _ = tree.query(query, k=k + 1, workers=-1)
     r = float(np.median(dist[:, -1]))
     return r * float(np.sqrt(np.pi / k))
 
