@@ -215,3 +215,21 @@ def test_tilted_off_grid_heart_found_mirror_symmetric() -> None:
     assert err["max_boundary_to_curve"] <= 1.0
     assert err["max_curve_to_boundary"] <= 1.05
 
+
+
+def test_symmetric_part_fit_stops_at_its_budget():
+    # Regression (issue 11): a part with one piece more than its budget is always
+    # rejected, so the part fit gives up there instead of fitting that piece.
+    from pde2cad.image.vectorize import _fit_run
+
+    x = np.linspace(0.0, 60.0, 241)
+    run = np.stack([x, 6.0 * np.sin(x / 4.0)], axis=1)  # ~2.4 periods of a wave
+    args = (run, np.arange(0), 0.5, run[0], run[-1], None, None, True, "optimal")
+    free, over = _fit_run(*args)
+    assert free is not None and not over
+    k = len(free.curves)
+    assert k >= 3
+    at_budget, over = _fit_run(*args, 1, k)
+    assert at_budget is not None and not over and len(at_budget.curves) <= k
+    short, over = _fit_run(*args, 1, k - 1)
+    assert short is None and over

@@ -134,6 +134,76 @@ def _solve(h: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float
     return np.asarray(x, dtype=np.float64)
 
 
+class _Problem:
+    """The fixed arrays of a batch in the stacked basis of both inner control points.
+
+    ``inner = base + lin @ x`` stacks p1 over p2 ((B, 2D) and (B, 2D, k)); the Gauss-Newton
+    products then take one matmul each instead of one per inner point (the arithmetic is
+    tiny, the number of numpy calls is the cost)."""
+
+    def __init__(self, batch: Batch, w: NDArray[np.float64]) -> None:
+        base1, base2, lin1, lin2 = _basis(batch)
+        self.dim = batch.p0.shape[1]
+        self.pts = batch.points
+        self.sw = np.sqrt(w)
+        self.sw3 = self.sw[..., None]
+        self.base = np.concatenate([base1, base2], axis=1)
+        self.lin = np.concatenate([lin1, lin2], axis=1)  # (B, 2D, k)
+        self.lin_t = self.lin.transpose(0, 2, 1)
+        l12 = lin1.transpose(0, 2, 1) @ lin2
+        k = lin1.shape[2]
+        # H = m00 l11 + m01 (l12 + l12^T) + m11 l22 with m = A^T A (A: the two inner weights).
+        self.quad = np.stack([lin1.transpose(0, 2, 1) @ lin1, l12 + l12.transpose(0, 2, 1),
+                              lin2.transpose(0, 2, 1) @ lin2], axis=1).reshape(len(w), 3, k * k)
+        self.ends = np.zeros((len(w), 4, self.dim))
+        self.ends[:, 0], self.ends[:, 3] = batch.p0, batch.p3
+
+    def ctrl(self, x: NDArray[np.float64], r=None) -> NDArray[np.float64]:
+        """Control points (B, 4, D) for the unknowns x (problems ``r`` only if given)."""
+        base, lin, ends = (self.base, self.lin, self.ends) if r is None else (self.base[r], self.lin[r], self.ends[r])
+        out = ends.copy()
+        out[:, 1:3] = (base + (lin @ x[..., None])[..., 0]).reshape(len(x), 2, self.dim)
+        return out
+
+    def state(self, t_, x_, r=None):
+        """Weighted inner Bernstein values A (B, N, 2), control points and weighted residuals."""
+        q, w1, w3 = (self.pts, self.sw, self.sw3) if r is None else (self.pts[r], self.sw[r], self.sw3[r])
+        ctrl = self.ctrl(x_, r)
+        bern = _bernstein(t_)
+        return bern[..., 1:3] * w1[..., None], ctrl, (bern @ ctrl - q) * w3
+
+    def hessian(self, a, r=None):
+        """Gauss-Newton matrix of the inner control points, (B, k, k)."""
+        quad = self.quad if r is None else self.quad[r]
+        m = (a.transpose(0, 2, 1) @ a).reshape(len(a), 4)[:, [0, 1, 3]]
+        k = self.lin.shape[2]
+        return (m[:, None, :] @ quad).reshape(len(a), k, k)
+
+    def project(self, a, resid, r=None):
+        """Gradient of the cost in x, (B, k)."""
+        lin_t = self.lin_t if r is None else self.lin_t[r]
+        return (lin_t @ (a.transpose(0, 2, 1) @ resid).reshape(len(a), -1, 1))[..., 0]
+
+    def coupling(self, a, jt, r=None):
+        """Mixed derivatives of the residuals in x and t, (B, N, k)."""
+        lin = self.lin if r is None else self.lin[r]
+        bsz, n = a.shape[:2]
+        return (a[..., :, None] * jt[..., None, :]).reshape(bsz, n, -1) @ lin
+
+
+def _speed(ctrl: NDArray[np.float64], t: NDArray[np.float64], sw3: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Weighted derivatives C'(t) of cubics (B, 4, D) at parameters (B, N): (B, N, D)."""
+    s = 1.0 - t
+    b1 = np.empty(t.shape + (3,))
+    b1[..., 0], b1[..., 1], b1[..., 2] = s * s, 2.0 * t * s, t * t
+    return (b1 @ (3.0 * (ctrl[:, 1:] - ctrl[:, :-1]))) * sw3
+
+
+def _cost(resid: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sums of squared residuals per problem, (B,)."""
+    return _ADD(_dot(resid, resid), axis=1)
+
+
 def fit_batch(
     batch: Batch, t: NDArray[np.float64], rounds: int, weights: NDArray[np.float64] | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -151,49 +221,15 @@ def fit_batch(
     t : (B, N) float
     errors : (B, N) float, 0 on padded rows
     """
-    pts, valid, p0, p3 = batch.points, batch.valid, batch.p0, batch.p3
+    pts, valid = batch.points, batch.valid
     w = valid.astype(float) if weights is None else np.where(valid, weights, 0.0)
-    sw = np.sqrt(w)
-    sw3 = sw[..., None]
-    base1, base2, lin1, lin2 = _basis(batch)
-    l11 = lin1.transpose(0, 2, 1) @ lin1
-    l12 = lin1.transpose(0, 2, 1) @ lin2
-    l12 = l12 + l12.transpose(0, 2, 1)
-    l22 = lin2.transpose(0, 2, 1) @ lin2
-    k = lin1.shape[2]
-
-    def inner(x, r=None):
-        if r is not None:  # the problems r only
-            return base1[r] + (lin1[r] @ x[..., None])[..., 0], base2[r] + (lin2[r] @ x[..., None])[..., 0]
-        return base1 + (lin1 @ x[..., None])[..., 0], base2 + (lin2 @ x[..., None])[..., 0]
-
-    def state(t_, x_, r=None):
-        q0, q3, q, w1, w3 = (p0, p3, pts, sw, sw3) if r is None else (p0[r], p3[r], pts[r], sw[r], sw3[r])
-        s_ = 1.0 - t_
-        ts = 3.0 * t_ * s_
-        a_, b_ = ts * s_, ts * t_
-        p1_, p2_ = inner(x_, r)
-        curve = ((s_ * s_ * s_)[..., None] * q0[:, None] + a_[..., None] * p1_[:, None]
-                 + b_[..., None] * p2_[:, None] + (t_ * t_ * t_)[..., None] * q3[:, None])
-        return a_ * w1, b_ * w1, s_, p1_, p2_, (curve - q) * w3
-
-    def hessian(aw, bw):
-        return (_dot(aw, aw)[:, None, None] * l11 + _dot(aw, bw)[:, None, None] * l12
-                + _dot(bw, bw)[:, None, None] * l22)
-
-    def project(aw, bw, r):
-        return (lin1.transpose(0, 2, 1) @ (aw[:, None, :] @ r).transpose(0, 2, 1)
-                + lin2.transpose(0, 2, 1) @ (bw[:, None, :] @ r).transpose(0, 2, 1))[..., 0]
-
-    # 1. linear solve around the prior
-    s0 = 1.0 - t
-    a0, b0 = 3.0 * t * s0 * s0 * sw, 3.0 * t * t * s0 * sw
-    c0 = (((s0**3)[..., None] * p0[:, None] + (t**3)[..., None] * p3[:, None] - pts) * sw[..., None]
-          + a0[..., None] * base1[:, None] + b0[..., None] * base2[:, None])
-    h0 = hessian(a0, b0)
-    x = (np.linalg.pinv(h0) @ (-project(a0, b0, c0))[..., None])[..., 0]
-    aw, bw, s, p1, p2, resid = state(t, x)
-    cost = _ADD(_dot(resid, resid), axis=1)
+    prob = _Problem(batch, w)
+    k = prob.lin.shape[2]
+    # 1. linear solve around the prior (the residuals at x = 0)
+    a0, _, c0 = prob.state(t, np.zeros((len(t), k)))
+    x = (np.linalg.pinv(prob.hessian(a0)) @ (-prob.project(a0, c0))[..., None])[..., 0]
+    a, ctrl, resid = prob.state(t, x)
+    cost = _cost(resid)
     lam = np.full(len(pts), 1e-3)
     active = np.ones(len(pts), bool)
     eye_k = np.eye(k)
@@ -201,13 +237,12 @@ def fit_batch(
     for _ in range(rounds):
         if not active.any():
             break
-        jt = (3.0 * (s * s)[..., None] * (p1 - p0)[:, None] + 6.0 * (t * s)[..., None] * (p2 - p1)[:, None]
-              + 3.0 * (t * t)[..., None] * (p3 - p2)[:, None]) * sw3
+        jt = _speed(ctrl, t, prob.sw3)
         ct = _dot(jt, jt)
-        g = (aw[..., None] * jt) @ lin1 + (bw[..., None] * jt) @ lin2
+        g = prob.coupling(a, jt)
         jtr = _dot(jt, resid)
-        hh = hessian(aw, bw)
-        r0 = project(aw, bw, resid)
+        hh = prob.hessian(a)
+        r0 = prob.project(a, resid)
         diag = hh.diagonal(axis1=1, axis2=2) + 1e-12
         pending = active.copy()
         for _try in range(4):
@@ -217,11 +252,11 @@ def fit_batch(
                 h = hh - g.transpose(0, 2, 1) @ gs + lam[:, None, None] * (diag[:, :, None] * eye_k)
                 dx = _solve(h, -(r0 - (gs.transpose(0, 2, 1) @ jtr[..., None])[..., 0]))
                 t_new = _unit_clip(t - (jtr + (g @ dx[..., None])[..., 0]) / cd)
-                new = state(t_new, x + dx)
-                cost_new = _ADD(_dot(new[-1], new[-1]), axis=1)
+                new = prob.state(t_new, x + dx)
+                cost_new = _cost(new[-1])
                 if (cost_new < cost).all():  # the usual case: every problem improves, no row selection
                     x, t, cost = x + dx, t_new, cost_new
-                    aw, bw, s, p1, p2, resid = new
+                    a, ctrl, resid = new
                     lam = np.maximum(lam / 3.0, 1e-7)
                     pending[:] = False
                     break
@@ -229,12 +264,11 @@ def fit_batch(
             else:
                 # Retries (and problems that stopped) cost only the problems still pending.
                 rows = np.flatnonzero(pending)
-                t_new, dx, new, cost_new = _retry(rows, x, t, lam, (ct, g, hh, diag, r0, jtr), eye_k, state)
+                t_new, dx, new, cost_new = _retry(rows, x, t, lam, (ct, g, hh, diag, r0, jtr), eye_k, prob)
             take = cost_new < cost[rows]
             got = rows[take]
             x[got], t[got], cost[got] = x[got] + dx[take], t_new[take], cost_new[take]
-            aw[got], bw[got], s[got] = new[0][take], new[1][take], new[2][take]
-            p1[got], p2[got], resid[got] = new[3][take], new[4][take], new[5][take]
+            a[got], ctrl[got], resid[got] = new[0][take], new[1][take], new[2][take]
             lam[got] = np.maximum(lam[got] / 3.0, 1e-7)
             lam[rows[~take]] *= 10.0
             pending[got] = False
@@ -242,24 +276,25 @@ def fit_batch(
                 break
         active &= ~pending
     # 3. positive tangent lengths, 4. errors
-    p1, p2 = _clamped(batch, t, valid, *inner(x))
-    ctrl = np.stack([p0, p1, p2, p3], axis=1)
+    inner = prob.ctrl(x)
+    p1, p2 = _clamped(batch, t, valid, inner[:, 1], inner[:, 2])
+    ctrl = np.stack([batch.p0, p1, p2, batch.p3], axis=1)
     t = _newton(ctrl, pts, t)
     errors = np.where(valid, _norm(_evaluate(ctrl, t) - pts), 0.0)
     return ctrl, t, errors
 
 
-def _retry(rows, x, t, lam, step, eye_k, state):
+def _retry(rows, x, t, lam, step, eye_k, prob: _Problem):
     """The damped step of :func:`fit_batch` for the problems ``rows`` only (``step`` holds
     the round's ``ct, g, hh, diag, r0, jtr``): new parameters, control-point step, state, cost."""
-    ct, g, hh, diag, r0, jtr = (a[rows] for a in step)
+    ct, g, hh, diag, r0, jtr = (v[rows] for v in step)
     cd = ct * (1.0 + lam[rows][:, None]) + 1e-12
     gs = g / cd[..., None]
     h = hh - g.transpose(0, 2, 1) @ gs + lam[rows][:, None, None] * (diag[:, :, None] * eye_k)
     dx = _solve(h, -(r0 - (gs.transpose(0, 2, 1) @ jtr[..., None])[..., 0]))
     t_new = _unit_clip(t[rows] - (jtr + (g @ dx[..., None])[..., 0]) / cd)
-    new = state(t_new, x[rows] + dx, rows)
-    return t_new, dx, new, _ADD(_dot(new[-1], new[-1]), axis=1)
+    new = prob.state(t_new, x[rows] + dx, rows)
+    return t_new, dx, new, _cost(new[-1])
 
 
 def _clamped(batch: Batch, t, valid, p1, p2):
@@ -272,7 +307,7 @@ def _clamped(batch: Batch, t, valid, p1, p2):
         if bad.any():
             s = 1.0 - t
             a, b = 3.0 * t * s * s * valid, 3.0 * t * t * s * valid
-            c = (s**3)[..., None] * p0[:, None] + (t**3)[..., None] * p3[:, None] - batch.points
+            c = (s * s * s)[..., None] * p0[:, None] + (t * t * t)[..., None] * p3[:, None] - batch.points
             p1 = np.where(bad[:, None], p0 + floor[:, None] * tan0, p1)
             res = -(a[..., None] * p1[:, None] + b[..., None] * p2[:, None] + c) * valid[..., None]
             den = np.maximum(_dot(b, b), 1e-300)
@@ -293,11 +328,14 @@ def _clamped(batch: Batch, t, valid, p1, p2):
 
 def _bernstein(t: NDArray[np.float64]) -> NDArray[np.float64]:
     s = 1.0 - t
-    out = np.empty(t.shape + (4,))  # filled in place: np.stack costs more than the arithmetic
-    out[..., 0] = s**3
-    out[..., 1] = 3.0 * t * s * s
-    out[..., 2] = 3.0 * t * t * s
-    out[..., 3] = t**3
+    s2, t2 = s * s, t * t
+    # Filled in place (np.stack costs more than the arithmetic); products, not ``**3``,
+    # which numpy computes by pow() at ten times the cost of a multiplication.
+    out = np.empty(t.shape + (4,))
+    out[..., 0] = s2 * s
+    out[..., 1] = 3.0 * t * s2
+    out[..., 2] = 3.0 * t2 * s
+    out[..., 3] = t2 * t
     return out
 
 

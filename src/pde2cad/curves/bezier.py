@@ -19,7 +19,7 @@ def bernstein(t: ArrayLike) -> NDArray[np.float64]:
     """Cubic Bernstein basis at ``t``: shape ``t.shape + (4,)``."""
     t = np.asarray(t, dtype=float)
     s = 1.0 - t
-    return np.stack([s**3, 3.0 * t * s * s, 3.0 * t * t * s, t**3], axis=-1)
+    return np.stack([s * s * s, 3.0 * t * s * s, 3.0 * t * t * s, t * t * t], axis=-1)  # pow() is 10x slower
 
 
 def evaluate(ctrl: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:

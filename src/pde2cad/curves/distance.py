@@ -43,7 +43,12 @@ def nearest(
     step = max(1, _BRUTE_PAIRS // 8 // max(len(samples), 1))
     for s in range(0, len(queries), step):
         q = queries[s : s + step]
-        d2 = np.sum((q[:, None, :] - samples[None, :, :]) ** 2, axis=2)
+        d2 = _squared_distances(q, samples)
+        if k == 1:  # the common case: argmin, without partition and sort
+            best = d2.argmin(axis=1)
+            idx[s : s + step, 0] = best
+            dist[s : s + step, 0] = np.sqrt(d2[np.arange(len(q)), best])
+            continue
         part = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < len(samples) else np.tile(
             np.arange(len(samples)), (len(q), 1))
         kept = np.take_along_axis(d2, part, axis=1)
@@ -51,6 +56,16 @@ def nearest(
         idx[s : s + step] = np.take_along_axis(part, order, axis=1)
         dist[s : s + step] = np.sqrt(np.take_along_axis(kept, order, axis=1))
     return (dist[:, 0], idx[:, 0]) if k == 1 else (dist, idx)
+
+
+def _squared_distances(q: NDArray[np.float64], samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Squared distances (n, m) between the rows of ``q`` (n, D) and ``samples`` (m, D),
+    one coordinate at a time (a sum over a length-2 last axis is a slow strided reduce)."""
+    d2 = np.zeros((len(q), len(samples)))
+    for j in range(q.shape[1]):
+        diff = q[:, j, None] - samples[None, :, j]
+        d2 += diff * diff
+    return d2
 
 
 def points_to_curves(

@@ -919,7 +919,7 @@ def fit_closed(
             # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
             # and at this size the join cannot be seen.
             one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method,
-                            max_pieces=1, deadline=deadline, edge_midpoints=True)
+                            max_pieces=0, deadline=deadline, edge_midpoints=True)
             if one.ok and len(one.fits) == 1:
                 one.corners = [0]
                 return one, offset

@@ -622,16 +622,16 @@ def _fit_part(pts, corners, sym, i0: int, i1: int, tol: float, g1: bool, method:
     # Past this the outline grows too much (each junction may still merge two lines).
     budget = min(plain - 1, max((plain + _SYMMETRY_GROWTH + copies) // copies, (2 * plain + copies) // (copies + 1)))
     cut_points = [tips[int((i0 + c) % n)] for c in local] if len(cuts) == len(local) else None
-    chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
-                     cut_points, deadline)
-    if chain is None and (cut_points or (c_start and sym.kind != "mirror")):
+    chain, over = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
+                           cut_points, deadline)
+    if chain is None and not over and (cut_points or (c_start and sym.kind != "mirror")):
         # Sharpened tips come from this part's own raster; the other parts' rasters can
         # disagree (non-grid rotations), so retry on the corner points themselves.
         if sym.kind != "mirror" and c_start:
             p_start = run[0]
             p_end = sym.apply(p_start)
-        chain = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
-                         None, deadline)
+        chain, _ = _fit_run(merged, cuts, tol, p_start, p_end, t_start, t_end, g1, method, copies, budget,
+                            None, deadline)
     if chain is None:
         return None
     if sym.kind == "mirror":
@@ -758,9 +758,13 @@ def _corner_param(part: NDArray[np.float64], run: NDArray[np.float64], local: ND
 def _fit_run(
     run, local_corners, tol, p_start, p_end, t_start, t_end, g1, method, copies=1, budget=None,
     cut_points=None, deadline: float | None = None,
-) -> ChainFit | None:
-    """Fit an open run split at its corners, with given end points and end tangents; None
-    when some piece cannot meet the tolerance (the symmetry is then not worth it).
+) -> tuple[ChainFit | None, bool]:
+    """Fit an open run split at its corners, with given end points and end tangents.
+
+    Returns the chain, or None when some piece cannot meet the tolerance or the run needs
+    more than ``budget`` pieces (the symmetry is then not worth it), and whether the budget
+    was the reason (other corner points would not help then: a symmetric part with more
+    pieces than the budget is always rejected, so the fit stops at the budget).
     ``cut_points`` are the corners' positions (default: their points in ``run``)."""
     cuts = np.r_[0, local_corners, len(run) - 1].astype(int)
     curves: list[NDArray[np.float64]] = []
@@ -770,6 +774,9 @@ def _fit_run(
         sub = run[a : b + 1]
         pos, tan = denoise(sub, closed=False, pos_window=7 * copies, tan_window=17 * copies)
         first, last = j == 0, j == len(cuts) - 2
+        allowed = None if budget is None else budget - len(fits) - 1
+        if allowed is not None and allowed < 0:
+            return None, True
         start_at = p_start if first else (None if cut_points is None else cut_points[j - 1])
         end_at = p_end if last else (None if cut_points is None else cut_points[j])
         chain = fit_chain(
@@ -777,15 +784,16 @@ def _fit_run(
             p_start=start_at, p_end=end_at,
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
-            max_pieces=None if budget is None else budget - len(fits), edge_midpoints=True,
+            # fit_chain's max_pieces allows one more piece (the one reaching the end).
+            max_pieces=allowed, edge_midpoints=True,
             deadline=deadline,
         )
         if not chain.ok:
-            return None
+            return None, allowed is not None and len(chain.fits) > allowed
         curves.append(chain.curves)
         fits.extend(chain.fits)
         breaks.extend(int(a) + chain.breaks[1:])
-    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64))
+    return ChainFit(np.concatenate(curves), fits, np.asarray(breaks, dtype=np.int64)), False
 
 
 def _curves_near_loop(curves: NDArray[np.float64], pts: NDArray[np.float64], tol: float) -> bool:
