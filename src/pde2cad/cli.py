@@ -458,6 +458,9 @@ def _run_reconstruct(args: argparse.Namespace) -> int:
 def _layout_line(layout: dict[str, Any]) -> str:
     valence = ", ".join(f"{c} of valence {v}" for v, c in layout["corner_valence"].items())
     creases = "" if layout.get("creases") is None else f", {layout['creases']} crease edges in input"
+    if layout.get("kind") == "crease regions":
+        return (f"layout: auto, the {layout['patches']} crease-bounded regions as segments "
+                f"(split into 3/4-sided patches below), {layout['components']} component(s){creases}")
     return (f"layout: auto, {layout['patches']} patches ({layout['faces']['quads']} quads, "
             f"{layout['faces']['triangles']} triangles), irregular corners: {valence or 'none'}, "
             f"{layout['components']} component(s){creases}")

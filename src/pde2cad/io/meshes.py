@@ -425,6 +425,55 @@ def auto_layout(
     return AutoLayout(labels, q_vertices, faces, summary, corners)
 
 
+def region_layout(
+    surface: Surface, guide: tuple[NDArray[np.float64], NDArray[np.int64]], *,
+    patches: int | None = None, patch_size: float | None = None,
+    crease_angle: float = CREASE_ANGLE,
+) -> AutoLayout | None:
+    """One segment per crease-bounded region of a mesh; None when it has no creases.
+
+    The fallback of :func:`reconstruct_auto` when the coarse faces cut by the creases leave
+    pieces the pipeline rejects (a filleted box with a hole: slivers along every crease).
+    A region is a face of the part between its sharp edges; the pipeline cuts the regions
+    that are not 3/4-sided (many corners, a hole, a tube) into pieces itself, so the
+    creases are the patch borders exactly.
+
+    1. Regions of the mesh's triangles (:func:`crease_regions`; regions smaller than
+       ``MIN_REGION_SHARE`` of a patch are faceting and join a neighbour).
+    2. Each point takes the region of the triangle it was sampled on (or of the nearest
+       triangle), and a region whose points fall apart keeps its largest piece
+       (:func:`clean_labels`).
+    """
+    vertices, tris = guide
+    count = patch_count(surface.points, vertices, tris, patches, patch_size)
+    tri_region = crease_regions(vertices, tris, crease_angle,
+                                MIN_REGION_SHARE * _area(vertices, tris) / count)
+    if tri_region.max() == 0:
+        return None
+    regions = (tri_region[surface.point_triangles] if surface.point_triangles is not None
+               else point_regions(surface.points, vertices, tris, tri_region))
+    labels = clean_labels(surface.points, regions, regions=regions)
+    summary: dict[str, object] = {
+        "patches": int(len(np.unique(labels))), "faces": {"quads": 0, "triangles": 0},
+        "corner_valence": {}, "regular_corners": 0, "components": _components(tris),
+        "creases": region_borders(tris, tri_region), "kind": "crease regions",
+    }
+    return AutoLayout(labels, np.zeros((0, 3)), [], summary, None)
+
+
+def _components(triangles: NDArray[np.int64]) -> int:
+    """Connected components of a triangle mesh (faces joined by shared vertices)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = int(triangles.max()) + 1
+    ring = triangles[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(ring)), (ring[:, 0], ring[:, 1])), shape=(n, n))
+    used = np.zeros(n, dtype=bool)
+    used[triangles.ravel()] = True
+    return int(len(np.unique(connected_components(graph, directed=False)[1][used])))
+
+
 #: A crease angle that finds no creases (the remesher then aligns to none).
 NO_CREASES = 179.0
 #: Smallest crease-bounded region, as a share of a patch's area (smaller ones are faceting).
@@ -504,9 +553,13 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
             if attempt == ATTEMPTS - 1 and best is None:
                 raise InputError(f"the automatic layout failed: {exc}") from exc
             if layout.summary.get("creases"):
+                say(f"layout {attempt + 1} rejected ({exc}); trying the crease regions as segments")
+                found = _region_attempt(surface, guide, patches, patch_size, angle, kwargs, say)
+                if found is not None:
+                    return found[0], _all_points(found[1], surface, full)
                 # Faceting read as creases (a coarse organic mesh) misleads the remesher.
                 angle = NO_CREASES
-                say(f"layout {attempt + 1} rejected ({exc}); remeshing across the creases")
+                say("remeshing across the creases")
             else:
                 say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
@@ -523,6 +576,28 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
                 f"{FINER}x the patches")
     assert best is not None
     return best[1], _all_points(best[2], surface, full)
+
+
+def _region_attempt(
+    surface: Surface, guide: tuple[NDArray[np.float64], NDArray[np.int64]],
+    patches: int | None, patch_size: float | None, crease_angle: float,
+    kwargs: dict[str, object], say: Callable[[str], None],
+) -> tuple[object, AutoLayout] | None:
+    """:func:`region_layout` reconstructed, or None where it has no creases or the
+    pipeline rejects it (a region it cannot split, such as a face with several holes)."""
+    from pde2cad.reconstruct import reconstruct
+
+    layout = region_layout(surface, guide, patches=patches, patch_size=patch_size,
+                           crease_angle=crease_angle)
+    if layout is None:
+        return None
+    say(f"crease regions: {layout.summary['patches']} segments; fitting")
+    try:
+        rec = reconstruct(surface.points, layout.labels, **kwargs)  # type: ignore[arg-type]
+    except InputError as exc:
+        say(f"crease regions rejected ({exc})")
+        return None
+    return rec, layout
 
 
 def _all_points(layout: AutoLayout, fitted: Surface, full: Surface) -> AutoLayout:
