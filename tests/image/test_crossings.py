@@ -9,6 +9,7 @@ import pytest
 
 import pde2cad
 from pde2cad.curves import bezier
+from pde2cad.curves.distance import points_to_curves
 from pde2cad.image.crossings import find_crossings, trim_corner_crossings
 from pde2cad.image.evaluate import outline_error
 from pde2cad.image.raster import read_image
@@ -78,10 +79,25 @@ def test_crossing_next_to_a_joint_is_found_and_trimmed() -> None:
     assert find_crossings([fixed]) == []
     assert np.array_equal(fixed[0, 3], fixed[1, 0])  # still joined
     # The boundary stays within the tolerance of the trimmed loop.
-    from pde2cad.curves.distance import points_to_curves
-
     assert points_to_curves(crack, fixed).max() <= 1.0
 
+
+
+def test_two_curve_sliver_is_trimmed_at_both_joints() -> None:
+    # A 2-px diagonal sliver (logo2) fitted by two cubics that cross just inside both
+    # joints: each crossing is reported at the joint it is next to and both are trimmed.
+    loop = np.array([[[311.0, 46.0], [311.921, 50.391], [305.315, 40.298], [306.0, 43.0]],
+                     [[306.0, 43.0], [305.079, 38.609], [311.685, 48.702], [311.0, 46.0]]])
+    upper = [[306 + (i + 1) // 2, 42 + i // 2] for i in range(10)]  # (306, 42), (307, 42), ...
+    pts = np.array(upper + [[x, y + 1] for x, y in upper[::-1]], float)
+    crack = np.vstack([pts, 0.5 * (pts + np.roll(pts, -1, axis=0))])
+    found = find_crossings([loop])
+    assert sorted((c.a, c.b, c.ta > 0.5) for c in found) == [(0, 1, True), (1, 0, True)]
+    fixed, n_fixed, n_left = trim_corner_crossings(loop, crack, 0.98)
+    assert (n_fixed, n_left) == (2, 0)
+    assert find_crossings([fixed]) == []
+    assert np.array_equal(fixed[0, 3], fixed[1, 0]) and np.array_equal(fixed[1, 3], fixed[0, 0])
+    assert points_to_curves(crack, fixed).max() <= 0.98
 
 @pytest.mark.parametrize("source", ["noisy_blob", "logo2"])
 def test_photo_outlines_do_not_cross(source: str) -> None:

@@ -163,7 +163,9 @@ def find_crossings(loops: list[NDArray[np.float64]]) -> list[Crossing]:
         for x, y, u, v in zip(a.tolist(), b.tolist(), ta.tolist(), tb.tolist()):
             follows = bool(nxt[x] == y and owner[x] == owner[y])
             precedes = bool(nxt[y] == x and owner[x] == owner[y])
-            if precedes and not follows:  # report consecutive pairs in loop order
+            # Report consecutive pairs in loop order; in a loop of two curves each follows
+            # the other, and the crossing is at the joint it is nearer to.
+            if precedes and (not follows or u + (1.0 - v) < (1.0 - u) + v):
                 x, y, u, v, follows = y, x, v, u, True
             at_joint = (follows and u > 1 - _EPS and v < _EPS) or (precedes and u < _EPS and v > 1 - _EPS)
             if not at_joint:
@@ -183,7 +185,9 @@ def trim_corner_crossings(
     old one (the two end control points shifted with it, keeping the end tangents) by
     the least of 0, 1/4, 1/2, 3/4 of the way that brings the boundary points near the
     corner within ``tolerance`` without the two pieces crossing again; 3. a crossing no
-    step resolves is left as it is (counted as unresolved).
+    step resolves is left as it is (counted as unresolved); 4. a curve crossing both its
+    neighbours is trimmed at one joint per pass, the crossings searched again after each
+    pass that trimmed something (a two-curve loop's curves can cross at both joints).
 
     Parameters
     ----------
@@ -200,31 +204,41 @@ def trim_corner_crossings(
         The trimmed loop, the number of crossings trimmed, and of those left (including
         crossings of non-consecutive curves and within one curve, which are not trimmed).
     """
-    every = find_crossings([curves])
-    found = [c for c in every if c.adjacent]
-    others = len(every) - len(found)
-    if not every:
-        return curves, 0, 0
     out = curves.copy()
-    done: set[int] = set()
-    fixed = left = 0
-    for c in found:
-        if c.a in done or c.b in done or not (0.0 < c.ta < 1.0 and 0.0 < c.tb < 1.0):
-            continue
-        done.update((c.a, c.b))
-        pair = _untangle_pair(out, c, points, tolerance)
-        if pair is None:
-            left += 1
-            continue
-        out[c.a], out[c.b] = pair
-        fixed += 1
-    return out, fixed, left + others
+    fixed = 0
+    while True:
+        every = find_crossings([out])
+        found = [c for c in every if c.adjacent]
+        others = len(every) - len(found)
+        done: set[int] = set()
+        left = waiting = now = 0
+        for c in found:
+            if not (0.0 < c.ta < 1.0 and 0.0 < c.tb < 1.0):
+                continue
+            if c.a in done or c.b in done:
+                # A curve crossing both neighbours (each joint of a two-curve sliver) is
+                # trimmed at one joint per pass: the cut moves the other's parameters.
+                waiting += 1
+                continue
+            done.update((c.a, c.b))
+            # The two curves of a two-curve loop may cross at their other joint too; that
+            # crossing stays for the next pass.
+            pair = _untangle_pair(out, c, points, tolerance, int(any((d.a, d.b) == (c.b, c.a) for d in found)))
+            if pair is None:
+                left += 1
+                continue
+            out[c.a], out[c.b] = pair
+            now += 1
+        fixed += now
+        if not waiting or not now:
+            return out, fixed, left + waiting + others
 
 
 def _untangle_pair(
-    curves: NDArray[np.float64], c: Crossing, points: NDArray[np.float64], tolerance: float,
+    curves: NDArray[np.float64], c: Crossing, points: NDArray[np.float64], tolerance: float, others: int = 0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-    """The two trimmed curves of one crossing (steps 1-2 of :func:`trim_corner_crossings`)."""
+    """The two trimmed curves of one crossing (steps 1-2 of :func:`trim_corner_crossings`);
+    ``others`` crossings of the two elsewhere (at their other joint) may remain."""
     from pde2cad.curves.distance import points_to_curves
 
     head, _ = bezier.split(curves[c.a], c.ta)
@@ -242,7 +256,7 @@ def _untangle_pair(
         h[3] = t[0] = cross + shift
         trial[c.a], trial[c.b] = h, t
         poly = bezier.evaluate(np.stack([h, t]), _GRID)
-        if _segment_hits(poly[:1], poly[1:])[0].size:
+        if _segment_hits(poly[:1], poly[1:])[0].size > others:
             continue
         if not len(near) or points_to_curves(near, trial).max() <= tolerance:
             return h, t

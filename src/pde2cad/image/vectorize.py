@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from pde2cad.curves import bezier
 from pde2cad.curves.distance import nearest, points_to_curves
-from pde2cad.curves.fit import CubicFit
+from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit
 from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
@@ -765,7 +765,10 @@ def _fit_run(
     more than ``budget`` pieces (the symmetry is then not worth it), and whether the budget
     was the reason (other corner points would not help then: a symmetric part with more
     pieces than the budget is always rejected, so the fit stops at the budget).
-    ``cut_points`` are the corners' positions (default: their points in ``run``)."""
+    ``cut_points`` are the corners' positions (default: their points in ``run``).
+    The pieces take the single fits' round count, not the pixel runs' fewer: the pooled
+    points of several copies zigzag between the copies, so their polyline bounds little
+    and the points' distances decide the test, which converged fits hold best."""
     cuts = np.r_[0, local_corners, len(run) - 1].astype(int)
     curves: list[NDArray[np.float64]] = []
     fits: list[CubicFit] = []
@@ -784,6 +787,7 @@ def _fit_run(
             p_start=start_at, p_end=end_at,
             tan_start=t_start if first else None, tan_end=t_end if last else None,
             g1=g1, param_points=pos, join_tangents=tan, method=method, c0_fallback=False,
+            rounds=NEWTON_ROUNDS,
             # fit_chain's max_pieces allows one more piece (the one reaching the end).
             max_pieces=allowed, edge_midpoints=True,
             deadline=deadline,
