@@ -324,7 +324,10 @@ def _build_network(
 
     t0 = time.perf_counter()
     _report(progress, "edges", 0, 1)
-    network = build_edges(pts, lab, layout, tree)
+    # Seams the split cut through one segment: fitted fair (build_edges).
+    cuts = {frozenset((a, b)) for pieces in splits.pieces.values()
+            for a in pieces for b in pieces if a != b}
+    network = build_edges(pts, lab, layout, tree, cuts)
     if continuity == "c1":
         # 3-sided patches: put their apex where a C1 pole can form (e.g. triangles around it).
         network = apex_first(network)

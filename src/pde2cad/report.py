@@ -194,7 +194,13 @@ def build_report(
             entry["near_fraction"] = fraction
             entry["max_angle_deg_regular"] = _nanmax(angles[~near])
             entry["max_angle_deg_near_irregular"] = _nanmax(angles[near])
-            split.add(entry)
+            # A crease keeps its kink: its angle is the part's dihedral, not a seam error.
+            entry["crease"] = bool(a is not None and b is not None
+                                   and (min(a, b), max(a, b)) in (getattr(network, "creases", None) or set()))
+            finite = angles[~np.isnan(angles)]
+            entry["min_angle_deg"] = float(finite.min()) if len(finite) else None
+            if not entry["crease"]:
+                split.add(entry)
         edges.append(entry)
     edges.sort(key=lambda e: (e["labels"][0] is None, e["labels"]))
 
@@ -244,6 +250,7 @@ def build_report(
             for b, a in getattr(getattr(rec, "splits", None), "merged", {}).items()
         },
         **_corner_summary(network, corners, split, worst_corner, diagonal),
+        **_crease_summary(edges if network is not None else None),
     }
     all_timings = {k: float(v) for k, v in getattr(rec, "timings", {}).items()}
     all_timings.update({k: float(v) for k, v in (timings or {}).items()})
@@ -357,6 +364,23 @@ def _corner_summary(
     }
 
 
+def _crease_summary(edges: list[dict[str, Any]] | None) -> dict[str, Any]:
+    """Shared edges the network keeps sharp (creases): how many, the range of the normal
+    angle across them (the part's dihedral as built), and the largest angle across the
+    other (smooth) seams. All None without a network."""
+    if edges is None:
+        return {"crease_edges": None, "crease_angle_deg": None, "max_angle_deg_smooth": None}
+    creases = [e for e in edges if e.get("crease")]
+    smooth = [e["max_angle_deg"] for e in edges if not e.get("crease")]
+    lows = [e["min_angle_deg"] for e in creases if e.get("min_angle_deg") is not None]
+    return {
+        "crease_edges": len(creases),
+        "crease_angle_deg": ([min(lows), max(e["max_angle_deg"] for e in creases)]
+                             if creases and lows else None),
+        "max_angle_deg_smooth": max(smooth, default=0.0),
+    }
+
+
 #: Patches with fewer points than this get a note in the summary (measured: 500-800 points
 #: per patch can fold faces near three-patch corners; from ~1000 the samples were reliable).
 SPARSE_PATCH = 1000
@@ -375,6 +399,11 @@ def summary_lines(report: Mapping[str, Any]) -> list[str]:
         f"fit: worst patch mean error {s['mean_error_rel']:.2g} x diagonal, "
         f"max {s['max_error_rel']:.2g} x diagonal (diagonal {s['diagonal']:.4g})",
     ]
+    span = s.get("crease_angle_deg")
+    if s.get("crease_edges") and span:
+        lines.append(f"creases: {s['crease_edges']} edges kept sharp, normal angle across them "
+                     f"{span[0]:.3g}-{span[1]:.3g} deg; smooth seams max {s['max_angle_deg_smooth']:.3g} deg")
+    seams = "smooth seams" if s.get("crease_edges") else "seams"
     irregular = s.get("irregular_corners")
     if irregular:
         near = s.get("max_angle_deg_near_irregular_corners")
@@ -382,14 +411,14 @@ def summary_lines(report: Mapping[str, Any]) -> list[str]:
         away = s.get("max_angle_deg_regular")
         away_text = "n/a" if away is None else f"{away:.3f} deg"
         lines.append(
-            f"seams: max normal angle {away_text} away from "
+            f"{seams}: max normal angle {away_text} away from "
             f"{_corner_kinds(s.get('irregular_valences') or {}, irregular)}, "
             f"{near_text} near them"
         )
     elif irregular == 0 and s.get("corner_valences") and _c1(report):
         # Only worth a line with C1: the angle is then the one that must stay ~0.
         lines.append(
-            "seams: every corner regular (four patches, or two at the open boundary), "
+            f"{seams}: every corner regular (four patches, or two at the open boundary), "
             f"max normal angle {s['max_angle_deg_regular']:.3f} deg"
         )
     if s.get("corners_matched") is False:

@@ -35,10 +35,14 @@ def test_a_holed_box_reconstructs_from_its_crease_regions(tmp_path: Path) -> Non
     assert layout.summary["components"] == 1
     rec = reconstruct(surface.points, layout.labels, continuity="c1")
     step = write_step(rec.shape, tmp_path / "box.step")
-    s = build_report(rec, step, orthogonal=False)["summary"]
+    report = build_report(rec, step, orthogonal=False)
+    s = report["summary"]
     diagonal = float(np.linalg.norm(surface.points.max(0) - surface.points.min(0)))
     assert s["valid"] and s["solid"] and s["free_edges"] == 0
     assert s["max_gap_rel"] <= 1e-7
+    # Every sharp edge of the box is 90 deg all along (before: 0-143 deg), the seams cut
+    # through its smooth faces are C1 (before: up to 4.3 deg).
+    _assert_creases(report, rec, {90.0})
     # Every input point near its face (the issue's figures: mean <= 2e-3 D, < 1 % beyond 1 % D).
     dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points, axis=1)
                            for p in rec.patches.values()])
@@ -51,6 +55,52 @@ def test_a_holed_box_reconstructs_from_its_crease_regions(tmp_path: Path) -> Non
     uu, vv = (a.ravel() for a in np.meshgrid(g, g))
     faces = np.concatenate([p.evaluate(uu, vv) for p in rec.patches.values()])
     assert np.percentile(cKDTree(truth).query(faces)[0], 95) <= 5e-3 * diagonal
+
+
+def _assert_creases(report: dict, rec: object, dihedrals: set[float], slack: float = 15.0) -> None:
+    """Each seam between two crease regions is a crease whose normal angle stays within
+    ``slack`` of one of the part's ``dihedrals`` along all of it; the seams the split cut
+    through a region are smooth (<= 1 deg)."""
+    region = {piece: label for label, pieces in rec.splits.pieces.items() for piece in pieces}
+    creases = smooth = 0
+    for e in report["edges"]:
+        a, b = (region.get(x, x) for x in e["labels"])
+        if a != b:
+            creases += 1
+            assert e["crease"], e
+            assert any(d - slack <= e["min_angle_deg"] and e["max_angle_deg"] <= d + slack
+                       for d in dihedrals), e
+        else:
+            smooth += 1
+            assert not e["crease"] and e["max_angle_deg"] <= 1.0, e
+    assert creases and smooth
+    assert report["summary"]["crease_edges"] == creases
+
+
+def test_a_revolved_knob_keeps_its_cone_creases(tmp_path: Path) -> None:
+    """A revolved profile (disc, cylinder, 53.13-deg cone, cylinder, disc): the crease
+    regions' seams keep 90 and 53.13 deg (before: one read 29 deg, two patches fell back to
+    C0 with a 15-deg smooth seam)."""
+    from pde2cad.reconstruct import reconstruct
+    from pde2cad.report import build_report
+    from pde2cad.occ import write_step
+
+    with bd.BuildPart() as knob:
+        with bd.BuildSketch(bd.Plane.XZ):
+            with bd.BuildLine():
+                bd.Polyline((0, 0), (1, 0), (1, 0.3), (0.6, 0.6), (0.6, 1.2), (0, 1.2), (0, 0))
+            bd.make_face()
+        bd.revolve(axis=bd.Axis.Z)
+    path = tmp_path / "knob.stl"
+    bd.export_stl(knob.part, str(path), tolerance=1e-3, angular_tolerance=0.1)
+    surface = read_surface(path, sample_points=40_000)
+    layout = region_layout(surface, (surface.vertices, surface.triangles))
+    assert layout is not None and layout.summary["patches"] == 5
+    rec = reconstruct(surface.points, layout.labels, continuity="c1")
+    report = build_report(rec, write_step(rec.shape, tmp_path / "knob.step"), orthogonal=False)
+    assert report["summary"]["solid"] and report["summary"]["max_gap_rel"] <= 1e-7
+    assert not report["summary"]["c0_fallback"]
+    _assert_creases(report, rec, {90.0, float(np.degrees(np.arctan2(0.4, 0.3)))}, slack=5.0)
 
 
 def test_a_mesh_without_creases_has_no_region_layout(tmp_path: Path) -> None:

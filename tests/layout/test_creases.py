@@ -184,3 +184,59 @@ def test_coarse_bunny_has_no_crease_bounded_faces() -> None:
     area = float(np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]),
                                 axis=1).sum() / 2)
     assert crease_regions(v, f, 30.0, min_area=area / 80).max() == 0
+
+
+def _cube_cloud(n: int, seed: int = 0) -> np.ndarray:
+    """Uniform samples on the surface of the unit cube."""
+    rng = np.random.default_rng(seed)
+    face = rng.integers(0, 6, n)
+    uv = rng.random((n, 2))
+    pts = np.empty((n, 3))
+    axis, side = face // 2, (face % 2).astype(float)
+    for a in range(3):
+        rows = axis == a
+        others = [b for b in range(3) if b != a]
+        pts[rows, a] = side[rows]
+        pts[np.ix_(rows, others)] = uv[rows]
+    return pts
+
+
+def test_crease_variation_matches_sampled_creases() -> None:
+    """The two-plane model of a crease's surface variation against sampled creases (30, 60
+    and 90 deg between the normals; points on both half-planes, the query on the line)."""
+    from scipy.spatial import cKDTree
+
+    from pde2cad.layout.creases import CLOUD_NEIGHBOURS, crease_variation
+
+    rng = np.random.default_rng(1)
+    for angle in (30.0, 60.0, 90.0):
+        half = np.radians(angle) / 2
+        s, x = rng.uniform(-1, 1, 40000), rng.uniform(-1, 1, 40000)
+        pts = np.column_stack([x, s * np.cos(half), np.abs(s) * np.sin(half)])
+        _, idx = cKDTree(pts).query(np.zeros((1, 3)), k=CLOUD_NEIGHBOURS)
+        hood = pts[idx[0]] - pts[idx[0]].mean(axis=0)
+        w = np.linalg.eigvalsh(hood.T @ hood)
+        assert w[0] / w.sum() == pytest.approx(crease_variation(angle), rel=0.35)
+
+
+def test_cloud_regions_of_a_cube_are_its_six_faces() -> None:
+    """A cube's clean samples fall into its 6 faces, each point on its own face but for a
+    band one spacing wide at the edges; a sphere has no creases; noise of half the point
+    spacing hides 30-deg creases (None, not a guess)."""
+    from pde2cad.layout.creases import cloud_regions
+
+    pts = _cube_cloud(30000)
+    regions = cloud_regions(pts, 30.0, 240)
+    assert regions is not None and regions.max() == 5
+    face = np.argmin(np.minimum(pts, 1 - pts), axis=1) * 2 + (pts.max(axis=1) > 1 - 1e-9)
+    spacing = np.sqrt(6.0 / 30000)
+    inner = np.min(np.sort(np.minimum(pts, 1 - pts), axis=1)[:, 1:], axis=1) > 1.5 * spacing
+    for r in range(6):  # every region is one face (majority), pure away from the edges
+        own = face[(regions == r) & inner]
+        assert np.all(own == np.bincount(own).argmax())
+    rng = np.random.default_rng(2)
+    ball = rng.normal(size=(20000, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
+    assert cloud_regions(ball, 30.0, 240) is None
+    noisy = pts + rng.normal(0.0, 0.5 * spacing, pts.shape)
+    assert cloud_regions(noisy, 30.0, 240) is None

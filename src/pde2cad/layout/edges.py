@@ -145,6 +145,18 @@ PLANE_RCOND = 0.2
 MLS_NEIGHBOURS = 40
 #: Edge samples per span projected onto the surface for the final fit.
 SAMPLES_PER_SPAN = 24
+#: Most spans of the first fit of a seam cut through a smooth segment (see build_edges): a
+#: cut has no shape of its own to follow, and the spans its wandering border data buy bend
+#: the patches on both sides (a filleted box's side band: cut edges wandering 0.09 across
+#: a flat face with 16 spans, Coons normals tilted up to 60 deg).
+CUT_SPANS = 2
+#: Polyline points per edge that measure its arc length (see _arc_params).
+ARC_SAMPLES = 512
+#: Crease edges (fitted at arc-length parameters) get this many times the spans of a free
+#: fit: a cubic keeps a quarter circle to ~1e-6 of its radius over 4 spans when free to
+#: choose its speed, only ~1e-4 at arc length (a can's rims: 1.3e-4 of the diagonal; with
+#: 8 spans, 5e-5).
+ARC_SPAN_FACTOR = 2
 #: Fewest spans of the final (projected) edge fit: its data are smooth samples on the surface.
 MIN_FINAL_SPANS = 4
 #: Weight of the squared third-derivative jumps at an edge's end knots in the joint fit of
@@ -326,6 +338,14 @@ def _edge_params(
         return t
     arc = d0 / np.maximum(d0 + d1, 1e-300)
     return arc if np.abs(arc - t).max() > FOLDED_EDGE else t
+
+
+def _arc_params(spline: BSpline, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The share of ``spline``'s length up to each parameter ``t`` (its arc-length
+    parameters, from a fine polyline of it)."""
+    fine = np.linspace(0.0, 1.0, ARC_SAMPLES)
+    run = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(spline(fine), axis=0), axis=1))])
+    return np.interp(t, fine, run / max(float(run[-1]), 1e-300))
 
 
 def _data_length(
@@ -619,6 +639,7 @@ def build_edges(
     labels: NDArray[np.int64],
     layout: Layout,
     tree: cKDTree | None = None,
+    cuts: set[frozenset[int]] | None = None,
 ) -> EdgeNetwork:
     """Refined corners, side loops and one fitted curve per edge of a segmented cloud.
 
@@ -632,6 +653,11 @@ def build_edges(
         have 3 or 4 corners).
     tree : cKDTree, optional
         Of ``points`` (built when omitted).
+    cuts : set of frozenset of two labels, optional
+        Neighbours whose shared edges are seams the layout cut through one smooth segment
+        (:func:`~pde2cad.layout.split.split_segments`): their border data only trace where
+        the cut happened to fall, so they are fitted with at most ``CUT_SPANS`` spans (a
+        fair curve on the surface) instead of following its wander.
 
     Returns
     -------
@@ -713,7 +739,7 @@ def build_edges(
         pick = np.flatnonzero(trim)
         pick = pick[np.linspace(0, len(pick) - 1, min(len(pick), SPAN_SAMPLE)).astype(np.int64)]
         n, _, _ = _choose_spans(pts_e[pick], t[pick])
-        spans[key] = n
+        spans[key] = min(n, CUT_SPANS) if cuts and frozenset(users[key]) in cuts else n
         lengths[key] = _data_length(pts_e, t, p0, p1)
         length = float(np.linalg.norm(chord))
         for end in (0, 1):
@@ -755,7 +781,7 @@ def build_edges(
             if sheets.angle(data[key][::step], sorted(who)) > CREASE_ANGLE:
                 creases.add(key)
                 smooth[key[0]] = smooth[key[1]] = False
-    pairs, regular = _pairs(loops, users, len(corners), away, smooth)
+    pairs, regular = _pairs(loops, users, len(corners), away, smooth, creases)
     scales = _pair_scales(pairs, regular, loops, users, lengths)
     # At a crease corner the quadric over all segments rounds the corner off: put it on the
     # intersection of the segments' own surfaces instead (nearest point to the estimate).
@@ -775,7 +801,8 @@ def build_edges(
     # The midline fixes where an edge runs ALONG the surface; its height above the surface is
     # better taken from the whole cloud: project samples of each edge onto a local quadric
     # and refit them (noise-free samples afford more spans).
-    final = {key: max(spans[key], MIN_FINAL_SPANS) for key in data}
+    final = {key: max(spans[key], MIN_FINAL_SPANS) * (ARC_SPAN_FACTOR if key in creases else 1)
+             for key in data}
     samples, sample_t = {}, {}
     for key, spline in splines.items():
         t = np.linspace(0.0, 1.0, SAMPLES_PER_SPAN * final[key] + 1)[1:-1]
@@ -790,6 +817,11 @@ def build_edges(
         if key in creases:
             # A crease's samples belong on the intersection of the two segments' surfaces.
             samples[key] = sheets.intersect(raw, sorted(users[key]))
+        if key in creases or (cuts and frozenset(users[key]) in cuts):
+            # Arc-length parameters: the patches on both sides of a crease or a cut take
+            # their parameterization from it (a band's top and bottom edges, fitted with
+            # speeds varying 20x along them, skewed its Coons rulings across a fillet).
+            sample_t[key] = _arc_params(splines[key], sample_t[key])
     splines = _joint_fit(samples, sample_t, final, corners, legs, pairs, scales)
     curves, errors, rms = {}, {}, {}
     for key, spline in splines.items():
@@ -859,15 +891,18 @@ def _pairs(
     n_corners: int,
     away: dict[tuple[int, Key], NDArray[np.float64]],
     smooth: dict[int, bool],
+    creases: set[Key] | None = None,
 ) -> tuple[dict[int, list[tuple[Key, Key]]], dict[int, bool]]:
     """Edges paired across each corner: for a shared edge, the two patches' other edges,
     when the surface is smooth at the corner or they run on smoothly through it (a crease
-    keeps its kink)."""
+    keeps its kink). The other edges of a crease edge's two patches lie on the two sides of
+    the crease: never a pair (two cuts meeting a 90-deg crease from both sides, their free
+    fits turning by 57 deg, were paired and flattened the crease at their corner to 0 deg)."""
     other = _other_sides(loops)
     pairs: dict[int, list[tuple[Key, Key]]] = {c: [] for c in range(n_corners)}
     wanted: dict[int, set[tuple[Key, Key]]] = {c: set() for c in range(n_corners)}
     for key, who in users.items():
-        if len(who) != 2:
+        if len(who) != 2 or (creases and key in creases):
             continue
         for corner in key:
             ea = other[(who[0], corner)][key]
