@@ -9,8 +9,10 @@ Usage (the project's venv python)::
 Cases, none designed for this project: the STL models shipped by Debian's OpenCASCADE data
 package (``/usr/share/opencascade/data/stl``, when installed), trimesh's analytic primitives
 (an ellipsoid, a torus of genus 1, a capsule) and a filleted box made with build123d (when
-installed) and tessellated. Variants: the mesh itself (faces kept), ``SAMPLES`` clean points
-sampled on it, and those points with Gaussian noise of ``NOISE`` x the diagonal D.
+installed) and tessellated, and mechanical parts made with build123d (a filleted box with a
+hole, a revolved knob, an L bracket, a flange with a bolt circle). Variants: the mesh itself
+(faces kept), ``SAMPLES`` clean points sampled on it, and those points with Gaussian noise of
+``NOISE`` x the diagonal D.
 
 Per case and variant, in a fresh process with a ``--timeout``: ``pde2cad`` (read, automatic
 layout, reconstruction, STEP written and read back) and open3d Poisson (normals from 20
@@ -23,7 +25,9 @@ neighbours, oriented over the tangent-plane graph, depth 8) on the same points. 
 * f->in p95: 95th percentile of the distance of face samples (a 40 x 40 grid per patch, or
   Poisson's vertices) to the true surface (``REFERENCE`` points sampled on the mesh), over D;
 * >1%D: fraction of the input farther than 0.01 D from the faces;
-* time (s, wall).
+* time (s, wall);
+* creases: the range of the normal angle across the edges kept sharp (deg; the part's
+  dihedral angles where they are known, e.g. 90 and 53 on the knob).
 """
 
 from __future__ import annotations
@@ -74,6 +78,8 @@ def _analytic() -> dict[str, Any]:
             return trimesh.load(str(path), force="mesh")
 
         cases["filleted_box"] = filleted_box
+        for part in _cad_parts(bd):
+            cases[part] = lambda part=part: _tessellated(bd, _cad_parts(bd)[part]())
     except ImportError:
         pass
     for path in sorted(OCC_STL.glob("*.stl")) if OCC_STL.is_dir() else []:
@@ -83,6 +89,47 @@ def _analytic() -> dict[str, Any]:
             if path.suffix.lower() in (".off", ".stl", ".obj", ".ply"):
                 cases[path.stem] = lambda p=path: trimesh.load(str(p), force="mesh")
     return cases
+
+
+def _cad_parts(bd: Any) -> dict[str, Any]:
+    """Mechanical parts of the kinds issue 10 names (exact B-reps, sharp edges and fillets):
+    a filleted box with a through hole (genus 1), a revolved knob (a 53-deg cone between
+    cylinders), an L bracket, a flange with a bolt circle (genus 4)."""
+
+    def holed_box() -> Any:
+        box = bd.fillet(bd.Box(4, 3, 1).edges().filter_by(bd.Axis.Z), radius=0.4)
+        return box - bd.Cylinder(0.6, 2)
+
+    def knob() -> Any:
+        with bd.BuildPart() as part:
+            with bd.BuildSketch(bd.Plane.XZ):
+                with bd.BuildLine():
+                    bd.Polyline((0, 0), (1, 0), (1, 0.3), (0.6, 0.6), (0.6, 1.2), (0, 1.2), (0, 0))
+                bd.make_face()
+            bd.revolve(axis=bd.Axis.Z)
+        return part.part
+
+    def bracket() -> Any:
+        low = (bd.Align.MIN,) * 3
+        return bd.Box(3, 1, 0.4, align=low) + bd.Box(0.4, 1, 2, align=low)
+
+    def flange() -> Any:
+        part = bd.Cylinder(2, 0.5) - bd.Cylinder(0.6, 1)
+        for loc in bd.PolarLocations(1.4, 3):
+            part = part - loc * bd.Cylinder(0.2, 1)
+        return part
+
+    return {"cad_holed_box": holed_box, "cad_knob": knob, "cad_bracket": bracket,
+            "cad_flange": flange}
+
+
+def _tessellated(bd: Any, part: Any) -> Any:
+    """A build123d part as a trimesh mesh (STL at 1e-3 / 0.1 rad)."""
+    import trimesh
+
+    path = Path(tempfile.mkdtemp()) / "part.stl"
+    bd.export_stl(part, str(path), tolerance=1e-3, angular_tolerance=0.1)
+    return trimesh.load(str(path), force="mesh")
 
 
 def _input(mesh: Any, variant: str, diagonal: float, work: Path) -> Path:
@@ -127,6 +174,7 @@ def _ours(path: Path, reference: np.ndarray, diagonal: float, continuity: str) -
     return {
         "valid": s["valid"], "closed": s["solid"] or s["closed"], "free_edges": s["free_edges"],
         "gap": s["max_gap_rel"], "seam": s.get("max_angle_deg_regular", s["max_angle_deg"]),
+        "creases": s.get("crease_angle_deg"),
         "in_f": float(dist.mean() / diagonal), "f_in95": float(np.percentile(back, 95) / diagonal),
         "far": float(np.mean(dist > 0.01 * diagonal)), "time": elapsed,
         "patches": layout.summary["patches"], "stages": rec.timings,
@@ -190,7 +238,12 @@ def _row(name: str, variant: str, method: str, r: dict[str, Any]) -> str:
     return (f"{name:18s} {variant:6s} {method:8s} {f(r['patches'], '>4d')} {str(r['valid']):>5s} "
             f"{str(r['closed']):>6s} {f(r['free_edges'], '>4d')} {f(r['gap'], '>8.1e')} "
             f"{f(r['seam'], '>6.2f')} {r['in_f']:>8.1e} {r['f_in95']:>8.1e} {r['far']:>6.3f} "
-            f"{r['time']:>6.1f}")
+            f"{r['time']:>6.1f} {_crease_text(r.get('creases'))}")
+
+
+def _crease_text(span: Any) -> str:
+    """The range of the normal angle across the creases kept sharp, e.g. ``80-97``."""
+    return "-" if not span else f"{span[0]:.0f}-{span[1]:.0f}"
 
 
 def _collect(proc: Any, queue: Any, limit: float) -> dict[str, Any]:
@@ -230,7 +283,7 @@ def main() -> None:
     names = args.cases.split(",") if args.cases else list(_analytic())
     print(f"{'case':18s} {'var':6s} {'method':8s} {'pat':>4s} {'valid':>5s} {'closed':>6s} "
           f"{'free':>4s} {'gap/D':>8s} {'seam':>6s} {'in->f/D':>8s} {'f->in95':>8s} {'>1%D':>6s} "
-          f"{'time':>6s}")
+          f"{'time':>6s} creases")
     results: list[dict[str, Any]] = []
     ctx = mp.get_context("spawn")
     for name in names:

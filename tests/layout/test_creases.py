@@ -213,7 +213,7 @@ def test_crease_variation_matches_sampled_creases() -> None:
         half = np.radians(angle) / 2
         s, x = rng.uniform(-1, 1, 40000), rng.uniform(-1, 1, 40000)
         pts = np.column_stack([x, s * np.cos(half), np.abs(s) * np.sin(half)])
-        _, idx = cKDTree(pts).query(np.zeros((1, 3)), k=CLOUD_NEIGHBOURS)
+        _, idx = cKDTree(pts).query(np.zeros((1, 3)), k=CLOUD_NEIGHBOURS[0])
         hood = pts[idx[0]] - pts[idx[0]].mean(axis=0)
         w = np.linalg.eigvalsh(hood.T @ hood)
         assert w[0] / w.sum() == pytest.approx(crease_variation(angle), rel=0.35)

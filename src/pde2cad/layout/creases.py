@@ -95,8 +95,9 @@ def background_bend(
     return np.where(count > 0, theta[col[middle]], 0.0)
 
 
-#: Neighbours whose spread tells a point near a crease of a cloud (surface variation).
-CLOUD_NEIGHBOURS = 30
+#: Neighbours whose spread tells a point near a crease of a cloud (surface variation): the
+#: first count at which the cloud's median point is calm enough (``CLOUD_NOISE_SHARE``).
+CLOUD_NEIGHBOURS = (30, 60, 120)
 #: Nearest neighbours each point is joined to when the regions are grown.
 CLOUD_LINKS = 8
 #: Points near a crease: their surface variation exceeds this share of the variation at a
@@ -107,6 +108,23 @@ CLOUD_SHARE = 0.5
 #: to tell creases of that angle (measured on planes: median 0.008 at noise 0.2 spacings,
 #: 0.029 at 0.4, 30 neighbours; the threshold at 30 deg is 0.0048): no crease regions.
 CLOUD_NOISE_SHARE = 0.35
+
+
+def _variation(points: NDArray[np.float64], idx: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Surface variation ``l0 / (l0 + l1 + l2)`` of each point's neighbours ``idx``, in
+    chunks (bounded memory on large clouds)."""
+    out = np.empty(len(points))
+    step = max(1, CHUNK_VALUES // idx.shape[1])
+    for start in range(0, len(points), step):
+        near = points[idx[start : start + step]]
+        hood = near - near.mean(axis=1, keepdims=True)
+        values = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", hood, hood))
+        out[start : start + step] = values[:, 0] / np.maximum(values.sum(axis=1), 1e-300)
+    return out
+
+
+#: Neighbour coordinates per chunk of :func:`_variation`.
+CHUNK_VALUES = 2_000_000
 
 
 def crease_variation(angle: float) -> float:
@@ -126,11 +144,12 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
     """Crease-bounded regions of a cloud without faces; None when it shows no creases or
     is too noisy to tell creases of ``angle`` degrees.
 
-    1. Surface variation of each point's ``CLOUD_NEIGHBOURS`` nearest neighbours (the
-       smallest share of their covariance).
+    1. Surface variation of each point's nearest neighbours (the smallest share of their
+       covariance), over the fewest of ``CLOUD_NEIGHBOURS`` at which the cloud's median
+       point stays below ``CLOUD_NOISE_SHARE`` of the threshold (step 2); None if even the
+       most do not (too noisy to tell creases of ``angle``).
     2. Points near a crease: variation above ``CLOUD_SHARE`` x :func:`crease_variation`
-       of ``angle``. A cloud whose median point is above ``CLOUD_NOISE_SHARE`` of that is
-       too noisy: None.
+       of ``angle``.
     3. The other points, joined to their neighbours, fall into connected regions; regions
        of fewer than ``min_points`` points (speckle along a crease) count as crease points.
     4. Crease points take the region of the nearest region point (on a crease's side the
@@ -145,15 +164,23 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
     from scipy.spatial import cKDTree
 
     pts = np.asarray(points, dtype=float)
-    k = min(CLOUD_NEIGHBOURS, len(pts))
     tree = cKDTree(pts)
-    _, idx = tree.query(pts, k=k, workers=-1)
-    hood = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
-    values = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", hood, hood))
-    variation = values[:, 0] / np.maximum(values.sum(axis=1), 1e-300)
     threshold = CLOUD_SHARE * crease_variation(angle)
-    if np.median(variation) > CLOUD_NOISE_SHARE * threshold:
+    k = min(CLOUD_NEIGHBOURS[0], len(pts))
+    _, idx = tree.query(pts, k=k, workers=-1)
+    variation = _variation(pts, idx)
+    # Noise spreads a neighbourhood's heights by its own size but its disk by r^2 ~ k, so
+    # its variation falls as 1/k while a crease's keeps: more neighbours for noisier clouds.
+    calm = [n for n in CLOUD_NEIGHBOURS
+            if np.median(variation) * k / n <= CLOUD_NOISE_SHARE * threshold]
+    if not calm:
         return None
+    if calm[0] != k:
+        k = min(calm[0], len(pts))
+        _, idx = tree.query(pts, k=k, workers=-1)
+        variation = _variation(pts, idx)
+        if np.median(variation) > CLOUD_NOISE_SHARE * threshold:
+            return None
     flat = variation <= threshold
     # Joined to the nearest few only: the variation's neighbourhood reaches ~3 spacings, as
     # far as a crease's band is wide, so its edges would bridge the band.

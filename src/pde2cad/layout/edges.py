@@ -807,13 +807,11 @@ def build_edges(
     for key, spline in splines.items():
         t = np.linspace(0.0, 1.0, SAMPLES_PER_SPAN * final[key] + 1)[1:-1]
         samples[key], sample_t[key] = spline(t), t
-    flat = np.vstack(list(samples.values()))
-    projected, _ = mls_project(flat, pts, tree)
-    start = 0
     for key in data:
-        count = len(samples[key])
-        raw, samples[key] = samples[key], projected[start : start + count]
-        start += count
+        # Onto the edge's own segments' surface: a quadric over every point near a cut
+        # that ends on a crease also fits the far side and lifts the cut off its face (a
+        # bracket's L-shaped faces: 2-21 deg seams across the flat).
+        raw, samples[key] = samples[key], sheets.project(samples[key], sorted(users[key]))[0]
         if key in creases:
             # A crease's samples belong on the intersection of the two segments' surfaces.
             samples[key] = sheets.intersect(raw, sorted(users[key]))
@@ -1007,15 +1005,17 @@ class _Sheets:
         self.points, self.labels, self.tree, self.reach = points, labels, tree, reach
 
     def project(
-        self, q: NDArray[np.float64], label: int, k: int = MLS_NEIGHBOURS
+        self, q: NDArray[np.float64], label: int | list[int], k: int = MLS_NEIGHBOURS
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:func:`mls_project` of ``q`` onto the points of segment ``label`` (or of the
+        segments listed)."""
         # The segment's points within ``reach`` of the queries only: a tree over a whole
         # segment of a 1e6-point cloud costs more than every query on it.
         rows = self.tree.query_ball_point(q, self.reach)
         idx = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in rows]))
-        idx = idx[self.labels[idx] == label]
+        idx = idx[np.isin(self.labels[idx], label)]
         if len(idx) < k:
-            idx = np.flatnonzero(self.labels == label)
+            idx = np.flatnonzero(np.isin(self.labels, label))
         own = self.points[idx]
         return mls_project(q, own, cKDTree(own), k)
 
