@@ -44,6 +44,10 @@ from pde2cad.errors import InputError
 NEIGHBOURS = 8
 #: Vertex points closer than this many neighbour radii are one mark.
 LINK_RADII = 3.0
+#: Points within this many neighbour radii of a cut's shortest path part the pieces beside it.
+BAND_RADII = 1.0
+#: Parts of a cell under this many points (crumbs between cuts) join their neighbours.
+MIN_PART = 20
 #: Rounds of averaging the foot angles over neighbours (:func:`smooth_angles`).
 SMOOTH_ROUNDS = 3
 #: Feet of a cell closer than this many neighbour radii (along their hole) are one cut (one
@@ -73,7 +77,8 @@ def _graph(points: NDArray[np.float64]) -> tuple[coo_matrix, NDArray[np.int64]]:
 
 def hole_cells(
     points: NDArray[np.float64], holes: list[NDArray[np.int64]]
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.int64],
+           NDArray[np.int64]]:
     """Step 1: each point's cell (index into ``holes``) and foot (index into ``points``).
 
     1. Multi-source Dijkstra from every hole point on the k-NN graph.
@@ -85,6 +90,8 @@ def hole_cells(
     cell, foot : (P,) int
     dist : (P,) float
         Length of the shortest path to the foot.
+    pred : (P,) int
+        The next point on that path (negative at the holes' points).
     idx : (P, k+1) int
         Each point's neighbours (itself first).
     """
@@ -93,13 +100,13 @@ def hole_cells(
     owner = np.full(len(points), -1, dtype=np.int64)
     for h, lp in enumerate(holes):
         owner[lp] = h
-    dist, _, foot = dijkstra(graph, indices=np.unique(sources), min_only=True, return_predecessors=True)
+    dist, pred, foot = dijkstra(graph, indices=np.unique(sources), min_only=True, return_predecessors=True)
     foot = np.asarray(foot, dtype=np.int64)
     reached = foot >= 0
     if not reached.all():
         near = np.flatnonzero(reached)[cKDTree(points[reached]).query(points[~reached])[1]]
-        foot[~reached], dist[~reached] = foot[near], dist[near]
-    return owner[foot], foot, np.asarray(dist, dtype=np.float64), idx
+        foot[~reached], dist[~reached], pred[~reached] = foot[near], dist[near], near
+    return owner[foot], foot, np.asarray(dist, dtype=np.float64), np.asarray(pred, dtype=np.int64), idx
 
 
 def loop_angles(points: NDArray[np.float64], loop: NDArray[np.int64]) -> tuple[
@@ -211,7 +218,7 @@ class _Cells:
     def __init__(self, points: NDArray[np.float64], holes: list[NDArray[np.int64]],
                  outer: NDArray[np.int64], radius: float) -> None:
         self.points, self.radius, self.k, self.holes = points, radius, len(holes), holes
-        self.cell, self.foot, self.dist, self.idx = hole_cells(points, holes)
+        self.cell, self.foot, self.dist, self.pred, self.idx = hole_cells(points, holes)
         on_outer = np.zeros(len(points), dtype=bool)
         on_outer[outer] = True
         self.near_outer: NDArray[np.bool_] = np.asarray(on_outer[self.idx].any(axis=1))
@@ -229,15 +236,27 @@ class _Cells:
         self.marks = np.zeros(0, dtype=np.int64)
         self.feet = np.zeros((0, self.k))  # foot angle of each mark's cut in each cell, or nan
 
-    def _feet(self, marks: NDArray[np.int64]) -> NDArray[np.float64]:
-        """(m, k) foot angle of each mark's cut in each cell: the mean foot angle of the
-        points of that cell within two neighbour steps; nan where there are none."""
+    def starts(self, marks: NDArray[np.int64]) -> NDArray[np.int64]:
+        """(m, k) where each mark's cut into each cell starts: the point of that cell within
+        two neighbour steps nearest the mark; -1 where there is none."""
         ring = self.idx[self.idx[marks]].reshape(len(marks), -1)
-        z = np.exp(1j * self.fa[ring])
-        out = np.full((len(marks), self.k), np.nan)
+        gap = np.linalg.norm(self.points[ring] - self.points[marks][:, None], axis=2)
+        out = np.full((len(marks), self.k), -1, dtype=np.int64)
         for h in range(self.k):
-            zh = np.where(self.cell[ring] == h, z, 0).sum(axis=1)
-            out[:, h] = np.where(np.abs(zh) > 0, np.angle(zh), np.nan)
+            mine = np.where(self.cell[ring] == h, gap, np.inf)
+            best = np.argmin(mine, axis=1)
+            ok = np.isfinite(mine[np.arange(len(marks)), best])
+            out[ok, h] = ring[ok, best[ok]]
+        return out
+
+    def _feet(self, marks: NDArray[np.int64]) -> NDArray[np.float64]:
+        """(m, k) foot angle of each mark's cut in each cell (where its shortest path from
+        :meth:`starts` meets the hole); nan where it touches none."""
+        start = self.starts(marks)
+        out = np.full(start.shape, np.nan)
+        for h in range(self.k):
+            ok = start[:, h] >= 0
+            out[ok, h] = _angle(self.points[self.foot[start[ok, h]]], self.frames[h])
         return out
 
     def add(self, marks: NDArray[np.int64], room: bool = False) -> None:
@@ -333,23 +352,70 @@ def _fill_gaps(cells: _Cells) -> None:
             cells.add(cells.nearest_rim(h, _wrap(np.concatenate(targets))), room=True)
 
 
+def cut_paths(pred: NDArray[np.int64], starts: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The points of the shortest paths from ``starts`` to the holes (``pred`` of
+    :func:`hole_cells`), followed for all cuts at once, one step a round."""
+    out = [starts]
+    cur = starts[starts >= 0]
+    while len(cur):
+        cur = pred[cur]
+        cur = cur[cur >= 0]
+        out.append(cur)
+    return np.unique(np.concatenate(out))
+
+
 def _pieces(cells: _Cells) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Step 5: each point's piece (cell, then the arc of its hole between consecutive feet
-    that holds its own foot) and the feet of all cuts."""
+    """Step 5: each point's piece and the feet of all cuts.
+
+    1. Per cell, the points within ``BAND_RADII`` radii of its cuts' shortest paths (and
+       ``LINK_RADII`` of their marks) are taken out; the rest falls into pieces (connected on the k-NN graph).
+    2. Pieces under ``MIN_PART`` points join the band; band points join the piece of their
+       nearest other point.
+    """
     piece = np.zeros(len(cells.points), dtype=np.int64)
+    start = cells.starts(cells.marks) if len(cells.marks) else np.zeros((0, cells.k), dtype=np.int64)
     feet, first = [], 0
     for h in range(cells.k):
-        ang, f = cells.bounds(h)
         m = cells.members[h]
-        if len(ang) < 2:
-            piece[m] = first
-            first += 1
-            continue
-        sector = (np.searchsorted(ang, cells.fa[m], side="right") - 1) % len(ang)
-        piece[m] = first + sector
-        first += len(ang)
-        feet.append(f)
+        mine = start[:, h][start[:, h] >= 0]
+        part = np.zeros(len(m), dtype=np.int64)
+        if len(mine) >= 2:
+            path = cut_paths(cells.pred, mine)
+            feet.append(np.unique(cells.foot[mine]))
+            ends = np.concatenate([cells.marks[start[:, h] >= 0], cells.foot[mine]])
+            part = _split_cell(cells.points[m], cells.idx, m, cells.points[path], cells.points[ends],
+                               cells.radius)
+        piece[m] = first + part
+        first += int(part.max()) + 1
     return piece, np.concatenate(feet) if feet else np.zeros(0, dtype=np.int64)
+
+
+def _split_cell(
+    pts: NDArray[np.float64], idx: NDArray[np.int64], members: NDArray[np.int64],
+    path: NDArray[np.float64], marks: NDArray[np.float64], radius: float,
+) -> NDArray[np.int64]:
+    """Step 5 for one cell (``members``; ``idx``: the whole segment's neighbours): parts
+    ``0..n-1`` of its points, apart across the cuts' points ``path`` and round their ends
+    ``marks`` (a cut starts a point or two inside the cell and ends inside the band of its
+    hole: no gap to leak through)."""
+    band = (cKDTree(path).query(pts)[0] <= BAND_RADII * radius) | (
+        cKDTree(marks).query(pts)[0] <= LINK_RADII * radius)
+    local = np.full(int(idx.shape[0]), -1, dtype=np.int64)
+    local[members] = np.arange(len(members))
+    nb = local[idx[members]]
+    keep = (nb >= 0) & ~band[:, None] & ~band[np.maximum(nb, 0)]
+    rows = np.repeat(np.arange(len(members)), idx.shape[1])[keep.ravel()]
+    graph = coo_matrix((np.ones(len(rows)), (rows, nb.ravel()[keep.ravel()])), shape=(len(members),) * 2)
+    comp = connected_components(graph, directed=False)[1]
+    size = np.bincount(comp)
+    solid = ~band & (size[comp] >= MIN_PART)
+    if not solid.any():
+        return np.zeros(len(members), dtype=np.int64)
+    out = np.unique(comp[solid], return_inverse=True)[1].reshape(-1)
+    full = np.empty(len(members), dtype=np.int64)
+    full[solid] = out
+    full[~solid] = out[cKDTree(pts[solid]).query(pts[~solid])[1]]
+    return full
 
 
 def cut_holes(
