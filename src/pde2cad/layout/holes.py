@@ -48,6 +48,8 @@ LINK_RADII = 3.0
 BAND_RADII = 1.0
 #: Parts of a cell under this many points (crumbs between cuts) join their neighbours.
 MIN_PART = 20
+#: Rounds of pushing feet apart (:func:`spread`).
+SPREAD_ROUNDS = 200
 #: Rounds of averaging the foot angles over neighbours (:func:`smooth_angles`).
 SMOOTH_ROUNDS = 3
 #: Feet of a cell closer than this many neighbour radii (along their hole) are one cut (one
@@ -62,7 +64,7 @@ ROOM_RADII = 8.0
 #: cuts, nor 150: gaps between vertices and saddles come out anywhere from 50 to 160
 #: degrees and 240-300 (a flange's bolt holes, a plate's two holes), and where one face of
 #: a part gets an extra cut and the face across its holes' walls not, the walls get T-nodes.
-GAP_DEGREES = 180.0
+GAP_DEGREES = 120.0
 
 
 def _graph(points: NDArray[np.float64]) -> tuple[coo_matrix, NDArray[np.int64]]:
@@ -219,6 +221,7 @@ class _Cells:
                  outer: NDArray[np.int64], radius: float) -> None:
         self.points, self.radius, self.k, self.holes = points, radius, len(holes), holes
         self.cell, self.foot, self.dist, self.pred, self.idx = hole_cells(points, holes)
+        self.graph = _graph(points)[0]
         on_outer = np.zeros(len(points), dtype=bool)
         on_outer[outer] = True
         self.near_outer: NDArray[np.bool_] = np.asarray(on_outer[self.idx].any(axis=1))
@@ -364,11 +367,55 @@ def cut_paths(pred: NDArray[np.int64], starts: NDArray[np.int64]) -> NDArray[np.
     return np.unique(np.concatenate(out))
 
 
+def spread(angles: NDArray[np.float64], least: float) -> NDArray[np.float64]:
+    """Sorted angles round a loop moved apart (each pair pushed by halves of what it lacks,
+    ``SPREAD_ROUNDS`` times) until consecutive ones lie ``least`` apart or as far as their
+    number allows; angles already far enough apart stay."""
+    n = len(angles)
+    if n < 2:
+        return angles
+    least = min(least, 2 * np.pi / n * 0.9)
+    a = angles.copy()
+    for _ in range(SPREAD_ROUNDS):
+        gap = np.diff(np.append(a, a[0] + 2 * np.pi))
+        push = np.maximum(least - gap, 0.0) / 2
+        if not push.any():
+            break
+        a = a - push + np.roll(push, 1)
+    return _wrap(a)
+
+
+def _routed(cells: _Cells, h: int, start: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The cuts of cell ``h`` from ``start`` (its points next to the marks): their feet on
+    the hole, spread ``ROOM_RADII`` radii apart (:func:`spread`; the shortest paths from
+    marks on the far side of a small hole converge on it, and a hole arc of a few radii is
+    no side the edge network finds), and the points of the shortest paths to them."""
+    loop = cells.holes[h]
+    natural = _angle(cells.points[cells.foot[start]], cells.frames[h])
+    order = np.argsort(natural)
+    start, natural = start[order], natural[order]
+    goal = spread(natural, ROOM_RADII * cells.radius / cells.span[h])
+    at = _angle(cells.points[loop], cells.frames[h])
+    feet = loop[np.argmin(np.abs(_wrap(at[None, :] - goal[:, None])), axis=1)]
+    moved = np.abs(_wrap(goal - natural)) > 1e-9
+    path = [cut_paths(cells.pred, start[~moved])]
+    if moved.any():
+        m = cells.members[h]
+        sub = cells.graph[m][:, m]
+        local = np.searchsorted(m, np.concatenate([feet[moved], start[moved]]))
+        _, pred = dijkstra(sub, indices=local[: moved.sum()], return_predecessors=True)
+        for row, s in enumerate(local[moved.sum():]):
+            path.append(m[cut_paths(np.asarray(pred[row], dtype=np.int64), np.array([s]))])
+    feet[~moved] = cells.foot[start[~moved]]
+    return feet, np.unique(np.concatenate(path))
+
+
 def _pieces(cells: _Cells) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """Step 5: each point's piece and the feet of all cuts.
 
-    1. Per cell, the points within ``BAND_RADII`` radii of its cuts' shortest paths (and
-       ``LINK_RADII`` of their marks) are taken out; the rest falls into pieces (connected on the k-NN graph).
+    1. Per cell, its cuts (:func:`_routed`); the points within ``BAND_RADII`` radii of
+       their paths (and ``LINK_RADII`` of their ends) are taken out; the rest falls into
+       pieces (connected on the k-NN graph).
     2. Pieces under ``MIN_PART`` points join the band; band points join the piece of their
        nearest other point.
     """
@@ -380,9 +427,9 @@ def _pieces(cells: _Cells) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         mine = start[:, h][start[:, h] >= 0]
         part = np.zeros(len(m), dtype=np.int64)
         if len(mine) >= 2:
-            path = cut_paths(cells.pred, mine)
-            feet.append(np.unique(cells.foot[mine]))
-            ends = np.concatenate([cells.marks[start[:, h] >= 0], cells.foot[mine]])
+            foot, path = _routed(cells, h, mine)
+            feet.append(foot)
+            ends = np.concatenate([cells.marks[start[:, h] >= 0], foot])
             part = _split_cell(cells.points[m], cells.idx, m, cells.points[path], cells.points[ends],
                                cells.radius)
         piece[m] = first + part
