@@ -22,6 +22,10 @@ pieces along seams chosen on the surface:
 
 Rings are cut in turn, so a ring next to one already cut ends its cuts where that ring's
 cuts end: the pieces meet at 4-valent corners on the shared loop.
+
+Segments with 3 or more loops (a face with several holes) are cut first, by
+:func:`~pde2cad.layout.holes.cut_holes`; a ring with 2 or more of their cut ends on a loop
+cuts there, at every one of them (the wall of a bolt hole, the rim of a flange).
 """
 
 from __future__ import annotations
@@ -300,7 +304,7 @@ def _cut_angles(
 def split_rings(
     points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
     first_new: int,
-) -> tuple[NDArray[np.int64], dict[int, list[int]]]:
+) -> tuple[NDArray[np.int64], dict[int, list[int]], dict[int, int]]:
     """Cut every segment with two boundary loops into 4-sided pieces (module docstring),
     and before them every segment with 3 or more (:func:`~pde2cad.layout.holes.cut_holes`).
 
@@ -321,6 +325,8 @@ def split_rings(
         The input array when no segment has two loops.
     pieces : dict[int, list[int]]
         Per cut segment, its pieces' labels (the first is the segment's own).
+    holed : dict[int, int]
+        The cut segments with 3 or more loops, and how many.
 
     Raises
     ------
@@ -364,7 +370,7 @@ def split_rings(
         out[members] = np.asarray(names)[cell.reshape(-1)]
         pieces[label] = names
         junctions = np.vstack([junctions, _cut_ends(points[members], t, theta, cut)])
-    return out, pieces
+    return out, pieces, {label: len(loops) for label, loops in loops_of.items() if len(loops) > 2}
 
 
 def _cut_holed(
