@@ -60,11 +60,13 @@ MERGE_RADII = 2.0
 #: corners closer than ``BORDER_SPAN``, 4, radii; pieces narrower than a few radii fit badly).
 ROOM_RADII = 8.0
 #: Largest angle (degrees) round a hole between consecutive cuts: wider gaps get
-#: ``ceil(gap / GAP_DEGREES)`` pieces (a half ring is a sound quad). Not 90, a ring's 4
-#: cuts, nor 150: gaps between vertices and saddles come out anywhere from 50 to 160
-#: degrees and 240-300 (a flange's bolt holes, a plate's two holes), and where one face of
-#: a part gets an extra cut and the face across its holes' walls not, the walls get T-nodes.
-GAP_DEGREES = 120.0
+#: ``ceil(gap / GAP_DEGREES)`` pieces (a half ring is a sound quad). Not 120: a plate's two
+#: holes (plate2, 100k samples) then got 3 pieces each where 2 do, 30 faces instead of 22,
+#: two of them folded (seams 59-141 deg instead of <= 3.3); not 90, a ring's 4 cuts, nor
+#: 150: gaps between vertices and saddles come out at 240-300 degrees (a flange's bolt holes,
+#: a plate's two holes), and where one face of a part gets an extra cut and the face across
+#: its holes' walls not, the walls get T-nodes.
+GAP_DEGREES = 180.0
 
 
 def _graph(points: NDArray[np.float64]) -> tuple[coo_matrix, NDArray[np.int64]]:
