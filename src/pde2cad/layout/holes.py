@@ -6,27 +6,38 @@ bore and bolt holes, a plate with two holes) is cut here, directly into quads wh
 ends the neighbouring rings (the holes' walls, the rim) then take as their own
 (:func:`cut_holes`):
 
-1. **Cells.** The longest loop is the outer one; every other loop (a hole) gets the points
-   closer to it than to any other hole, by shortest paths on the surface (one multi-source
-   Dijkstra run; each point also keeps its *foot*, the hole point its path starts from).
-   A cell holds its shortest paths, so it retracts onto its hole: a ring, whose inner loop
-   is the hole and whose outer loop runs along bisectors with other cells and along the
-   outer loop.
-2. **Vertices.** Where the outer loop of a cell changes what it runs along: points whose
-   neighbours lie in 3 cells, or in 2 next to the outer loop. Each group of such points is
-   one *mark*, cut to the hole of every cell it touches.
-3. **Known corners.** Corners of the layout on the outer loop become marks; corners on a
-   hole become marks on the cell's outer loop where the feet point the same way.
-4. **Gaps.** Round each hole, where consecutive cuts' feet lie more than ``GAP_DEGREES``
-   apart, marks in between on the cell's outer loop (a mark on a bisector cuts both cells,
-   so no T-node).
-5. **Pieces.** A point's piece is its cell and the arc of its hole between consecutive feet
-   that holds its own foot: shortest paths do not cross, so each piece is bounded by a hole
-   arc, two cuts and one stretch of bisector or outer loop: a quad.
+1. **Cells.** Every loop gets the points closer to it than to any other loop, by shortest
+   paths on the surface (one multi-source Dijkstra run on a k-NN graph; each point keeps
+   its *foot*, the loop point its path starts from, and the next point on that path). A
+   cell holds its shortest paths, so it is a ring round its loop whose outer side runs
+   along bisectors with other cells, unless the distance to the outer loop has a ridge
+   inside it (a plate with two holes: the outer loop's cell then has 3 sides). Then the
+   longest loop (the outer one) is no cell and the holes' cells are rings whose outer side
+   runs along bisectors and along the outer loop.
+2. **Vertices.** Where the outer side of a cell changes what it runs along: points whose
+   neighbours (two steps out) lie in 3 cells, or in 2 next to the outer loop. Each group
+   of such points is one *mark*, cut to the loop of every cell it touches. A bisector
+   gets a mark in its middle too (the shortest cut between its two loops), where that cut
+   leaves ``ROOM_RADII`` from the others.
+3. **Known corners.** Corners of the layout on the outer loop become marks; corners on
+   another loop become marks on its cell's outer side where the feet point the same way.
+4. **Gaps.** Round each loop, where consecutive cuts' feet lie more than ``GAP_DEGREES``
+   apart, marks in between on the cell's outer side (a mark on a bisector cuts both cells,
+   so no T-node), where they leave room.
+5. **Pieces.** Each cut is the shortest path from its mark to its cell's loop, its foot
+   moved along the loop where feet lie closer than ``ROOM_RADII`` (paths from beyond a
+   small hole converge on it). Without the points along the cuts, a cell falls into one
+   piece between each two consecutive cuts, bounded by a loop arc, two cuts and one
+   stretch of bisector or outer loop: a quad. The cuts' ends on the loops are returned
+   for the rings beyond (walls of the holes, the rim), which cut there too.
 
-Known limits: loops are ordered by angle round their centroid in their PCA plane (a loop
-that does not run round its centroid once in that plane, e.g. a long curved slot, gets
-pieces in the wrong order); the cells are rings only on a segment of genus 0.
+Known limits: feet are ordered by angle round their loop's centroid in its PCA plane (a
+loop that does not run round its centroid once in that plane, e.g. a long curved slot,
+gets cuts in the wrong order); the cells are rings only on a segment of genus 0; a web
+between a hole and the rim or another hole only a few neighbour radii wide is split by the
+bisector into pieces too thin for the layout (a sheet at 20k points with a hole 3 radii
+from its rim is refused) or gets a cut across it with a side of 4 radii, which can fold in
+the fit; a piece wrapping far round a small hole can fold too.
 """
 
 from __future__ import annotations
@@ -312,13 +323,6 @@ class _Cells:
         graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(rim),) * 2)
         return bool(connected_components(graph, directed=False)[0] == 1)
 
-    def spacing(self) -> float:
-        """Shortest distance (along its hole) between consecutive feet of a cell: the
-        shortest side of a piece there."""
-        gaps = [np.diff(np.append(a, a[0] + 2 * np.pi)) * self.span[h]
-                for h in range(self.k) for a in [self.bounds(h)[0]] if len(a) > 1]
-        return float(min((g.min() for g in gaps), default=0.0))
-
     def nearest_rim(self, h: int, targets: NDArray[np.float64]) -> NDArray[np.int64]:
         """The points on cell ``h``'s outer loop whose feet point nearest each target angle."""
         pool = self.members[h][self.rim[self.members[h]]]
@@ -473,6 +477,10 @@ def cut_holes(
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Cut a segment with 3 or more boundary loops into quads (module docstring).
 
+    1. Cells round every loop (no loop is special: no narrow cell of a large hole reaches
+       out to the outer loop between small ones, as a flange's bore between its bolt holes).
+    2. Where those are not all rings, cells round all loops but the longest.
+
     Parameters
     ----------
     points : (P, 3) float
@@ -496,28 +504,26 @@ def cut_holes(
     Raises
     ------
     InputError
-        Fewer than 3 loops.
+        Fewer than 3 loops, or no partition into rings.
     """
     if len(loops) < 3:
         raise InputError(f"cut_holes needs 3 or more boundary loops, got {len(loops)}")
     length = [float(np.ptp(points[lp], axis=0).sum()) for lp in loops]
     o = int(np.argmax(length))
     known = np.zeros((0, 3)) if known is None else known
-    tries = [_partition(points, [lp for j, lp in enumerate(loops) if j != o], loops[o], radius, known),
-             _partition(points, loops, np.zeros(0, dtype=np.int64), radius, known)]
-    rings = [t for t in tries if t[3]]
+    piece, ends, rings = _partition(points, loops, np.zeros(0, dtype=np.int64), radius, known)
     if not rings:
-        raise InputError(f"a segment with {len(loops)} boundary loops could not be cut into rings")
-    # Cells round every loop when they are rings (no loop is special: no narrow cell of a
-    # large hole squeezing out to the outer loop between small ones), else round the holes.
-    piece, ends, _, _ = rings[-1]
+        piece, ends, rings = _partition(points, [lp for j, lp in enumerate(loops) if j != o], loops[o],
+                                        radius, known)
+    if not rings:
+        raise InputError(f"the cells round its {len(loops)} boundary loops are no rings")
     return piece, ends
 
 
 def _partition(
     points: NDArray[np.float64], sources: list[NDArray[np.int64]], outer: NDArray[np.int64],
     radius: float, known: NDArray[np.float64],
-) -> tuple[NDArray[np.int64], NDArray[np.float64], float, bool]:
+) -> tuple[NDArray[np.int64], NDArray[np.float64], bool]:
     """Steps 1-5 with cells round ``sources`` (the holes, or every loop), ``outer`` the loop
     that is no source (or none).
 
@@ -525,8 +531,6 @@ def _partition(
     -------
     piece, ends
         As :func:`cut_holes`.
-    spacing : float
-        :meth:`_Cells.spacing`.
     rings : bool
         Whether every cell is a ring.
     """
@@ -539,7 +543,7 @@ def _partition(
     _fill_gaps(cells)
     piece, feet = _pieces(cells)
     ends = np.vstack([points[feet], points[cells.marks[cells.near_outer[cells.marks]]]])
-    return piece, ends, cells.spacing(), all(cells.is_ring(h) for h in range(cells.k))
+    return piece, ends, all(cells.is_ring(h) for h in range(cells.k))
 
 
 __all__ = ["cut_holes", "hole_cells", "loop_angles", "vertex_marks"]

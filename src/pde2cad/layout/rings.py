@@ -387,7 +387,11 @@ def _cut_holed(
     if len(known):
         near = cKDTree(points[np.concatenate([lp for lp, _ in loops])]).query(known)[0] <= reach
         known = known[near]
-    piece, new = cut_holes(points[members], local, radius, known)
+    try:
+        piece, new = cut_holes(points[members], local, radius, known)
+    except InputError as err:
+        raise InputError(f"segment {label} has {len(loops)} boundary loops and could not be cut "
+                         f"into quads ({err}); split it so that no piece has more than one hole") from err
     out = out.copy() if out is labels else out
     start = max(int(out.max()) + 1, first_new)
     names = [label] + list(range(start, start + int(piece.max())))
