@@ -312,17 +312,29 @@ def test_segments_with_two_boundary_loops(tmp_path: Path, kind: str, faces: int,
     assert "2 boundary loops" in rec.splits.summary()
 
 
-def test_segment_with_two_holes_is_refused_by_name() -> None:
-    """Three boundary loops (a sheet with two holes as one segment) are not cut: the message
-    names the segment and the fix, instead of one patch over both holes."""
-    from pde2cad.errors import InputError
+def _two_holes(xy: NDArray[np.float64]) -> NDArray[np.bool_]:
+    return (np.hypot(xy[:, 0] - 0.6, xy[:, 1] - 1) > 0.3) & (np.hypot(xy[:, 0] - 1.4, xy[:, 1] - 1) > 0.3)
 
-    def keep(xy: NDArray[np.float64]) -> NDArray[np.bool_]:
-        return (np.hypot(xy[:, 0] - 0.6, xy[:, 1] - 1) > 0.3) & (np.hypot(xy[:, 0] - 1.4, xy[:, 1] - 1) > 0.3)
 
-    cloud = _sheet_region(keep)
-    with pytest.raises(InputError, match="segment 0 has 3 boundary loops"):
-        reconstruct(cloud.points, cloud.labels, continuity="c1")
+def test_segment_with_two_holes_is_cut_into_quads(tmp_path: Path) -> None:
+    """Three boundary loops (a sheet with two holes 0.2 apart and 0.3 from the rim, as one
+    segment) are cut round the holes (:mod:`pde2cad.layout.holes`), refused before: 24
+    quads, valid, no gap, on the true surface (measured 4.8e-7 D)."""
+    cloud = _sheet_region(_two_holes)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert rec.splits.loops == {0: 3} and "segment 0: 3 boundary loops" in rec.splits.summary()
+    m = measure(read_step(rec.write_step(tmp_path / "split.step")))
+    assert m["valid"] and not m["closed"] and m["max_gap"] <= 1e-7 * cloud.diagonal
+    assert _true_error(rec, cloud) <= 1e-5
+    assert all(len(ids) in (3, 4) for ids in rec.network.loops.values())
+
+
+@pytest.mark.xfail(strict=True, reason="the cut across the 0.2-wide web between the holes "
+                   "leaves two quads with a 4-radii side, whose fit folds (180 deg)")
+def test_segment_with_two_holes_has_smooth_seams(tmp_path: Path) -> None:
+    cloud = _sheet_region(_two_holes)
+    rec = reconstruct(cloud.points, cloud.labels, continuity="c1")
+    assert measure(read_step(rec.write_step(tmp_path / "split.step")))["max_angle_deg"] <= 1.0
 
 
 def _normal_regions(points: NDArray[np.float64], normals: NDArray[np.float64]) -> NDArray[np.int64]:

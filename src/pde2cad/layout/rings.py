@@ -22,6 +22,10 @@ pieces along seams chosen on the surface:
 
 Rings are cut in turn, so a ring next to one already cut ends its cuts where that ring's
 cuts end: the pieces meet at 4-valent corners on the shared loop.
+
+Segments with 3 or more loops (a face with several holes) are cut first, by
+:func:`~pde2cad.layout.holes.cut_holes`; a ring with 2 or more of their cut ends on a loop
+cuts there, at every one of them (the wall of a bolt hole, the rim of a flange).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import BORDER_SPAN, CLUSTER_FACTOR, Layout
+from pde2cad.layout.holes import cut_holes
 
 #: Neighbours per point whose directions tell an open-boundary point.
 OPEN_NEIGHBOURS = 30
@@ -236,6 +241,26 @@ def _marks_on(
     return on if len(on) in (3, 4) else None
 
 
+def _loop_marks(
+    loop_pts: NDArray[np.float64], marks: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    rim: bool, reach: float,
+) -> NDArray[np.float64] | None:
+    """The marks a ring's cuts end at on one loop (:func:`_cut_angles`), or None."""
+    ends = _ends_on(loop_pts, marks[2], reach)
+    if ends is not None:
+        return ends
+    return _marks_on(loop_pts, np.vstack([marks[0], marks[1]]) if rim else marks[0], reach)
+
+
+def _ends_on(loop_pts: NDArray[np.float64], ends: NDArray[np.float64], reach: float) -> NDArray[np.float64] | None:
+    """The ``ends`` (of the cuts of a segment with holes) within ``reach`` of a loop's
+    points; None unless there are 2 or more."""
+    if not len(ends):
+        return None
+    on = ends[cKDTree(loop_pts).query(ends)[0] <= reach]
+    return on if len(on) >= 2 else None
+
+
 def junction_corners(
     layout: Layout, tree: cKDTree, labels: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -253,14 +278,14 @@ def junction_corners(
 def _cut_angles(
     points: NDArray[np.float64], members: NDArray[np.int64],
     loops: list[tuple[NDArray[np.int64], bool]], theta: NDArray[np.float64],
-    marks: tuple[NDArray[np.float64], NDArray[np.float64]], reach: float,
+    marks: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], reach: float,
 ) -> list[NDArray[np.float64]]:
-    """Step 3's cut angles on both loops: at the marks on a loop (``marks``: junctions and
-    cut ends; rim corners, counted on open loops), else the other loop's, else ``CUTS``
-    evenly round from the first loop point."""
+    """Step 3's cut angles on both loops: at the ends of the cuts of a segment with holes
+    on a loop (``marks[2]``, 2 or more: every one is a corner there), else at the marks on
+    it (``marks``: junctions and cut ends; rim corners, counted on open loops), else the
+    other loop's, else ``CUTS`` evenly round from the first loop point."""
     tree = cKDTree(points[members])
-    found = [_marks_on(points[lp], np.vstack([marks[0], marks[1]]) if rim else marks[0], reach)
-             for lp, rim in loops]
+    found = [_loop_marks(points[lp], marks, rim, reach) for lp, rim in loops]
     c0, c1 = (None if f is None else theta[tree.query(f)[1]] for f in found)
     if c0 is None and c1 is None:
         start = theta[np.searchsorted(members, loops[0][0][0])]
@@ -279,8 +304,9 @@ def _cut_angles(
 def split_rings(
     points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
     first_new: int,
-) -> tuple[NDArray[np.int64], dict[int, list[int]]]:
-    """Cut every segment with two boundary loops into 4-sided pieces (module docstring).
+) -> tuple[NDArray[np.int64], dict[int, list[int]], dict[int, int]]:
+    """Cut every segment with two boundary loops into 4-sided pieces (module docstring),
+    and before them every segment with 3 or more (:func:`~pde2cad.layout.holes.cut_holes`).
 
     Parameters
     ----------
@@ -299,27 +325,40 @@ def split_rings(
         The input array when no segment has two loops.
     pieces : dict[int, list[int]]
         Per cut segment, its pieces' labels (the first is the segment's own).
+    holed : dict[int, int]
+        The cut segments with 3 or more loops, and how many.
 
     Raises
     ------
     InputError
-        A segment with more than 2 boundary loops (the message names it).
+        A segment with 3 or more boundary loops that
+        :func:`~pde2cad.layout.holes.cut_holes` cannot cut into rings.
     """
     reach = CLUSTER_FACTOR * layout.radius
     junctions, rims = junction_corners(layout, tree, labels)
-    out, pieces = labels, {}
-    for label in (int(v) for v in layout.labels_present):
-        loops = boundary_loops(points, labels, tree, label, layout.radius, layout.crossed(label))
+    out, pieces = labels, dict[int, list[int]]()
+    loops_of = {label: boundary_loops(points, labels, tree, label, layout.radius, layout.crossed(label))
+                for label in (int(v) for v in layout.labels_present)}
+    # Segments with holes first: the rings beyond their loops (the holes' walls) end their
+    # cuts where theirs end.
+    ends = np.zeros((0, 3))
+    for label, loops in loops_of.items():
         if len(loops) > 2:
-            raise InputError(
-                f"segment {label} has {len(loops)} boundary loops (at most 2, one hole, are "
-                "cut automatically); split it so that no piece has more than one hole"
-            )
+            # Rim corners count on open loops only (as for rings: a folded projected loop
+            # makes spurious ones).
+            rim = [lp for lp, is_open in loops if is_open]
+            near = np.zeros(len(rims), dtype=bool)
+            if rim and len(rims):
+                near = cKDTree(points[np.concatenate(rim)]).query(rims)[0] <= reach
+            known = np.vstack([junctions, rims[near], ends])
+            out, ends = _cut_holed(points, labels, out, label, loops, known, layout.radius, pieces,
+                                   first_new, ends)
+    for label, loops in loops_of.items():
         if len(loops) != 2:
             continue
         members = np.flatnonzero(labels == label)
         t, theta, length = ring_coordinates(points[members], [np.searchsorted(members, lp) for lp, _ in loops])
-        cut = _cut_angles(points, members, loops, theta, (junctions, rims), reach)
+        cut = _cut_angles(points, members, loops, theta, (junctions, rims, ends), reach)
         width = float(np.mean([_loop_length(points[lp]) for lp, _ in loops])) / len(cut[0])
         slices = int(round(length / width)) if length >= ASPECT * width else 1
         # Pieces too small for the layout to tell their corners apart are worse than long ones.
@@ -331,7 +370,34 @@ def split_rings(
         out[members] = np.asarray(names)[cell.reshape(-1)]
         pieces[label] = names
         junctions = np.vstack([junctions, _cut_ends(points[members], t, theta, cut)])
-    return out, pieces
+    return out, pieces, {label: len(loops) for label, loops in loops_of.items() if len(loops) > 2}
+
+
+def _cut_holed(
+    points: NDArray[np.float64], labels: NDArray[np.int64], out: NDArray[np.int64], label: int,
+    loops: list[tuple[NDArray[np.int64], bool]], known: NDArray[np.float64], radius: float,
+    pieces: dict[int, list[int]], first_new: int, ends: NDArray[np.float64],
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Cut a segment with 3 or more loops into quads (:func:`~pde2cad.layout.holes.cut_holes`,
+    ending at the ``known`` corners on its loops); returns the labels (a copy of ``labels``
+    on the first cut) and ``ends`` with its cuts' ends added; records its pieces' labels."""
+    members = np.flatnonzero(labels == label)
+    local = [np.searchsorted(members, lp) for lp, _ in loops]
+    reach = CLUSTER_FACTOR * radius
+    if len(known):
+        near = cKDTree(points[np.concatenate([lp for lp, _ in loops])]).query(known)[0] <= reach
+        known = known[near]
+    try:
+        piece, new = cut_holes(points[members], local, radius, known)
+    except InputError as err:
+        raise InputError(f"segment {label} has {len(loops)} boundary loops and could not be cut "
+                         f"into quads ({err}); split it so that no piece has more than one hole") from err
+    out = out.copy() if out is labels else out
+    start = max(int(out.max()) + 1, first_new)
+    names = [label] + list(range(start, start + int(piece.max())))
+    out[members] = np.asarray(names)[piece]
+    pieces[label] = names
+    return out, np.vstack([ends, new])
 
 
 def _loop_length(loop_pts: NDArray[np.float64]) -> float:

@@ -41,13 +41,15 @@ another neighbour); the corners this moves are split in the next round. A piece 
 segment.
 
 Before these steps, segments with two boundary loops (rings, tubes, a sheet with a hole) are
-cut by :func:`~pde2cad.layout.rings.split_rings`, and before every round the layout gets
+cut by :func:`~pde2cad.layout.rings.split_rings`, and segments with more (a face with
+several holes) by :func:`~pde2cad.layout.holes.cut_holes` before them, and before every round the layout gets
 the corners where two segments' loops turn sharply together (:func:`_add_sharp_turns`: the
 ends of the former shared edge of two merged cube-sphere faces touch only two labels, which
 the layout drops as kinks). A segment all but 4 of whose corners read straight or wider is
 a quad with T-nodes (c), whatever the widest read (240 degrees there).
 
-Limits: the layout must see the corners; a segment with 3 or more boundary loops is refused.
+Limits: the layout must see the corners; a segment with 3 or more boundary loops is cut only
+when the cells round its loops are rings (see :mod:`~pde2cad.layout.holes`).
 """
 
 from __future__ import annotations
@@ -127,21 +129,25 @@ class SplitReport:
         Input labels merged into another before splitting (two segments meeting along two
         borders, e.g. the halves of a tube, together a segment without corners).
     rings : list[int]
-        Input labels with two boundary loops (rings, tubes, sheets with a hole), cut by
-        :func:`~pde2cad.layout.rings.split_rings` (their ``corners``: 0).
+        Input labels with two or more boundary loops (rings, tubes, sheets with holes), cut
+        by :func:`~pde2cad.layout.rings.split_rings` (their ``corners``: 0).
+    loops : dict[int, int]
+        Of those, the ones with 3 or more loops (faces with holes) and how many.
     """
 
     pieces: dict[int, list[int]] = field(default_factory=dict)
     corners: dict[int, int] = field(default_factory=dict)
     merged: dict[int, int] = field(default_factory=dict)
     rings: list[int] = field(default_factory=list)
+    loops: dict[int, int] = field(default_factory=dict)
 
     def summary(self) -> str:
         """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
         lines = [f"segment {b}: merged into {a}" for b, a in sorted(self.merged.items())]
         return "\n".join(lines + [
             f"segment {label}: "
-            + ("2 boundary loops" if label in self.rings else f"{self.corners[label]} corners")
+            + (f"{self.loops.get(label, 2)} boundary loops" if label in self.rings
+               else f"{self.corners[label]} corners")
             + f" -> {len(p)} pieces {p}"
             for label, p in sorted(self.pieces.items())
         ])
@@ -901,7 +907,8 @@ def _cut_rings(
     """Labels with every segment of two boundary loops (a ring, a tube, a sheet with a hole)
     cut into quads by :func:`~pde2cad.layout.rings.split_rings`, recorded in ``report``
     (``rings``)."""
-    out, pieces = split_rings(points, labels, layout, tree, first_new)
+    out, pieces, loops = split_rings(points, labels, layout, tree, first_new)
+    report.loops.update(loops)
     for label, names in pieces.items():
         report.pieces[label] = names
         report.corners[label] = 0
