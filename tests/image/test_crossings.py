@@ -120,3 +120,30 @@ def test_photo_outlines_do_not_cross(source: str) -> None:
     err = outline_error(_despeckled(mask, 2), [lp.curves for lp in d.loops])
     assert err["max_boundary_to_curve"] <= 1.0
     assert err["max_curve_to_boundary"] <= 1.05
+
+
+def test_crossing_fit_is_redone_with_converged_pieces_before_crack_lines() -> None:
+    # A smooth random blob (a DEM-like level set): the break search's 3-round pieces of its
+    # outline cross, and untangling would patch crack-polygon lines in (13 -> 21 curves);
+    # the loop is fitted again with converged pieces, which do not cross.
+    from scipy import ndimage
+
+    from pde2cad.curves.fit import NEWTON_ROUNDS
+    from pde2cad.curves.piecewise import PIECE_ROUNDS
+    from pde2cad.image import vectorize as vec
+    from pde2cad.image.contours import trace_loops
+    from pde2cad.image.corners import CORNER_ANGLE, detect_corners
+
+    z = ndimage.gaussian_filter(np.random.default_rng(0).random((72, 72)), 5)
+    mask = z > np.median(z)
+    loop = max(trace_loops(mask), key=lambda c: len(c.points))
+    pts, corners = loop.points, detect_corners(loop.points)
+    quick = vec._plain_fit(pts, corners, 1.0, True, "optimal", None, PIECE_ROUNDS)
+    patched = vec._untangle(pts, vec._close_gaps(quick.curves), list(quick.lines) or [False] * len(quick.curves), 1.0)
+    assert PIECE_ROUNDS < NEWTON_ROUNDS and patched is not None and len(patched[0]) > len(quick.curves)
+    fitted = vec._fit_loop(loop, 1.0, True, True, "optimal", CORNER_ANGLE)
+    assert len(fitted.curves) <= len(quick.curves) and "crack" not in fitted.parameterizations
+    assert not find_crossings([fitted.curves])
+    drawing = pde2cad.vectorize(mask, tolerance=1.0)
+    err = outline_error(mask, [lp.curves for lp in drawing.loops])
+    assert max(err["max_boundary_to_curve"], err["max_curve_to_boundary"]) <= 1.0

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from pde2cad.curves.fit import CubicFit
 from pde2cad.curves.piecewise import (
-    ChainFit, DeadlineExceeded, _Fitter, end_tangent, start_tangent, straighten,
+    PIECE_ROUNDS, ChainFit, DeadlineExceeded, _Fitter, end_tangent, start_tangent, straighten,
 )
 
 
@@ -47,6 +47,7 @@ def merge_closed(
     lines: bool = True,
     side: float = 8.0,
     min_radius: float | None = None,
+    rounds: int = PIECE_ROUNDS,
 ) -> tuple[ChainFit, int]:
     """Merge neighbouring pieces of a closed chain while one cubic fits both.
 
@@ -83,6 +84,9 @@ def merge_closed(
         Least bend radius of a cubic merged across a sharp join (default a quarter of the
         tolerance: a tighter bend turns within a fraction of the tolerance, a corner in
         disguise, and can hide a tiny self-intersecting loop).
+    rounds : int
+        Levenberg-Marquardt rounds per pair fit (see
+        :func:`pde2cad.curves.piecewise.fit_chain`).
 
     Returns
     -------
@@ -95,7 +99,7 @@ def merge_closed(
         return chain, offset
     twice = np.vstack([points, points, points[:1]])
     ptwice = twice if param_points is None else np.vstack([param_points, param_points, param_points[:1]])
-    fitter = _Fitter(twice, tolerance, ptwice, method, midpoints=True)
+    fitter = _Fitter(twice, tolerance, ptwice, method, rounds, midpoints=True)
     starts = (offset + chain.breaks[:-1]) % n
     lengths = np.diff(chain.breaks).astype(np.int64)
     sharp = np.isin(np.arange(k), chain.corners)

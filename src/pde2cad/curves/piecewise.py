@@ -877,6 +877,7 @@ def fit_closed(
     deadline: float | None = None,
     lines: bool = True,
     soft_corners: NDArray[np.int64] | None = None,
+    rounds: int = PIECE_ROUNDS,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop of points (``points[-1]`` joins back to ``points[0]``).
 
@@ -907,6 +908,8 @@ def fit_closed(
     soft_corners : (s,) int, optional
         Points where joins inside a run may stay C0 (corners that are not forced breaks;
         see :func:`fit_chain`'s ``corner_points``).
+    rounds : int
+        See :func:`fit_chain`.
 
     Returns
     -------
@@ -926,7 +929,7 @@ def fit_closed(
             # A speck: one cubic closing on itself (a single C0 join) is the cheapest outline,
             # and at this size the join cannot be seen.
             one = fit_chain(pts[ring], tolerance, g1=False, param_points=pos[ring], method=method,
-                            max_pieces=0, deadline=deadline, edge_midpoints=True)
+                            rounds=rounds, max_pieces=0, deadline=deadline, edge_midpoints=True)
             if one.ok and len(one.fits) == 1:
                 one.corners = [0]
                 return one, offset
@@ -937,7 +940,7 @@ def fit_closed(
                 pts[ring], tolerance, p_start=pos[offset], p_end=pos[offset],
                 tan_start=tan[offset], tan_end=tan[offset], g1=True,
                 param_points=pos[ring], join_tangents=tan[ring], method=method, deadline=deadline,
-                edge_midpoints=True,
+                edge_midpoints=True, rounds=rounds,
             )
         if chain is not None and not chain.ok:
             chain = None  # opened on the denoised curve it cannot hold: reopen on a vertex
@@ -945,7 +948,7 @@ def fit_closed(
             # One cubic cannot close G1 with itself: there the join is a corner.
             chain = fit_chain(pts[ring], tolerance, g1=g1, param_points=pos[ring],
                               join_tangents=tan[ring], method=method, deadline=deadline,
-                              edge_midpoints=True)
+                              edge_midpoints=True, rounds=rounds)
             chain.corners = sorted(set(chain.corners) | {0})
         return (straighten(chain, pts[ring], tolerance) if lines else chain), offset
     offset = int(cidx[0])
@@ -966,13 +969,14 @@ def fit_closed(
     straight = [line_chain(run, tips[j], tips[j + 1], tolerance) if lines else None for j, run in enumerate(runs)]
     curved = [j for j, c in enumerate(straight) if c is None]
     prefetch_whole_runs([runs[j] for j in curved], [smoothed[j][0] for j in curved], tips[curved],
-                        tips[np.asarray(curved, dtype=np.int64) + 1], tolerance, method)
+                        tips[np.asarray(curved, dtype=np.int64) + 1], tolerance, method, rounds)
     for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
         run, (pos, tan), chain = runs[j], smoothed[j], straight[j]
         if chain is None:
             chain = fit_chain(run, tolerance, p_start=tips[j], p_end=tips[j + 1], g1=g1,
                               param_points=pos, join_tangents=tan, method=method, deadline=deadline,
-                              edge_midpoints=True, corner_points=None if soft is None else soft[ring][a : b + 1])
+                              edge_midpoints=True, corner_points=None if soft is None else soft[ring][a : b + 1],
+                              rounds=rounds)
             chain = straighten(chain, run, tolerance) if lines else chain
         flags.extend(chain.lines or [False] * len(chain.fits))
         corner_list.append(len(fits))
@@ -987,7 +991,7 @@ def fit_closed(
 
 def prefetch_whole_runs(
     runs: list[NDArray[np.float64]], params: list[NDArray[np.float64]], p_starts: NDArray[np.float64],
-    p_ends: NDArray[np.float64], tolerance: float, method: str,
+    p_ends: NDArray[np.float64], tolerance: float, method: str, rounds: int = PIECE_ROUNDS,
 ) -> None:
     """Fit each run as one C0 piece (every parameterization where the search ones pass),
     all runs in a few batches, into the fit cache.
@@ -1000,7 +1004,7 @@ def prefetch_whole_runs(
     """
     if len(runs) < 2:
         return
-    fitter = _Fitter(np.concatenate(runs), tolerance, np.concatenate(params), method, PIECE_ROUNDS, True)
+    fitter = _Fitter(np.concatenate(runs), tolerance, np.concatenate(params), method, rounds, True)
     sizes = np.array([len(r) for r in runs], dtype=np.int64)
     starts = np.r_[0, np.cumsum(sizes)[:-1]]
     rest = [n for n in fitter.all_names if n not in fitter.names]
@@ -1031,6 +1035,7 @@ def fit_closed_free(
     corners: NDArray[np.int64] | None = None,
     method: str = "optimal",
     deadline: float | None = None,
+    rounds: int = PIECE_ROUNDS,
 ) -> tuple[ChainFit, int]:
     """Fit a closed loop with breaks wherever C0 pieces reach and G1 joins made on them.
 
@@ -1040,6 +1045,7 @@ def fit_closed_free(
     Steps: 1. open the loop at its first corner or kink (C0 closing join), else at its
     sharpest turn with the denoised tangent there (G1 closing join); 2. fit the run with
     :func:`fit_chain` (``free_joins``); 3. make pieces straight where their chord fits.
+    ``rounds`` is :func:`fit_chain`'s.
 
     Returns
     -------
@@ -1062,7 +1068,7 @@ def fit_closed_free(
     ring = np.r_[offset:n, 0 : offset + 1]
     chain = fit_chain(pts[ring], tolerance, tan_start=t_end, tan_end=t_end, g1=True, param_points=pos[ring],
                       join_tangents=tan[ring], method=method, deadline=deadline, edge_midpoints=True,
-                      corner_points=allowed[ring])
+                      corner_points=allowed[ring], rounds=rounds)
     if t_end is None or len(chain.fits) == 1:
         chain.corners = sorted(set(chain.corners) | {0})
     return straighten(chain, pts[ring], tolerance, closed=True), offset

@@ -20,7 +20,7 @@ from pde2cad.curves.fit import NEWTON_ROUNDS, CubicFit
 from pde2cad.curves.merge import merge_closed
 from pde2cad.curves.parameterize import METHODS
 from pde2cad.curves.piecewise import (
-    SAFETY, ChainFit, DeadlineExceeded, clear_fit_cache, corner_positions, denoise, fit_chain, fit_closed,
+    PIECE_ROUNDS, SAFETY, ChainFit, DeadlineExceeded, clear_fit_cache, corner_positions, denoise, fit_chain, fit_closed,
     fit_closed_free, line_chain,
 )
 from pde2cad.errors import InputError
@@ -265,24 +265,16 @@ def _fit_loop(
     contour: ContourLoop, tol: float, symmetry: bool, g1: bool, method: str, corner_angle: float,
     deadline: float | None = None,
 ) -> OutlineLoop:
+    """One loop's outline. Steps: 1. the plain fit (:func:`_plain_fit`) and its untangling,
+    refitted with converged pieces where crack lines were patched in
+    (:func:`_fewer_crack_lines`); 2. the symmetric fit where it saves curves; 3. the
+    untangled curves, or the fitted ones when nothing crossed."""
     pts = contour.points
     corners = detect_corners(pts, angle=corner_angle)
     begun = time.thread_time()
-    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline)
-    hard = _straight_side_corners(pts, corners, tol) if g1 else corners
-    if len(hard) < len(corners) and len(chain.fits) > 1:
-        # Fewer forced breaks; kept only where it saves pieces (on noisy outlines the
-        # corners-forced fit can be far cheaper).
-        if hard.size:
-            soft, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners)
-        else:
-            soft, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline)
-        if len(soft.fits) < len(chain.fits):
-            chain, offset = soft, at
-    # Straight sides are lines spanning both chords of the corner test (see merge_closed).
-    chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
-                            method=method, deadline=deadline, side=2.0 * CORNER_SCALE)
+    chain = _plain_fit(pts, corners, tol, g1, method, deadline, PIECE_ROUNDS)
     plain_s = time.thread_time() - begun  # CPU time: a loaded machine does not change it
+    chain, untangled = _fewer_crack_lines(pts, corners, tol, g1, method, deadline, chain)
     curves, methods, n_corners = chain.curves, chain.methods, len(chain.corners)
     max_err, mean_err = chain.max_error, chain.mean_error
     is_line = list(chain.lines) or [False] * len(curves)
@@ -293,8 +285,8 @@ def _fit_loop(
         taken = None if found is None else _symmetric_outline(pts, found, tol)
         if taken is not None:
             curves, methods, n_corners, max_err, mean_err, sym_name, fitted, is_line = taken
+            untangled = _untangle(pts, _close_gaps(curves), is_line, tol)
     curves = _close_gaps(curves)
-    untangled = _untangle(pts, curves, is_line, tol)
     if untangled is not None:
         curves, is_line, max_err, mean_err = untangled
         if sym_name is None:
@@ -314,6 +306,56 @@ def _fit_loop(
         fitted_curves=int(fitted),
         is_line=is_line,
     )
+
+
+def _plain_fit(
+    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str,
+    deadline: float | None, rounds: int,
+) -> ChainFit:
+    """A loop's fit without symmetry, its pieces fitted with ``rounds`` Levenberg-Marquardt
+    rounds. Steps: 1. :func:`fit_closed` with the corners as forced breaks; 2. with G1, the
+    fit with only straight sides' corners forced (or none), kept where it has fewer pieces
+    (on noisy outlines the corners-forced fit can be far cheaper); 3. neighbouring pieces
+    merged (:func:`merge_closed`; straight sides are lines spanning both chords of the
+    corner test)."""
+    chain, offset = fit_closed(pts, tol, corners=corners, g1=g1, method=method, deadline=deadline, rounds=rounds)
+    hard = _straight_side_corners(pts, corners, tol) if g1 else corners
+    if len(hard) < len(corners) and len(chain.fits) > 1:
+        if hard.size:
+            soft, at = fit_closed(pts, tol, corners=hard, method=method, deadline=deadline, soft_corners=corners,
+                                  rounds=rounds)
+        else:
+            soft, at = fit_closed_free(pts, tol, corners=corners, method=method, deadline=deadline, rounds=rounds)
+        if len(soft.fits) < len(chain.fits):
+            chain, offset = soft, at
+    chain, _ = merge_closed(chain, pts, offset, tol, param_points=denoise(pts, closed=True)[0],
+                            method=method, deadline=deadline, side=2.0 * CORNER_SCALE, rounds=rounds)
+    return chain
+
+
+def _fewer_crack_lines(
+    pts: NDArray[np.float64], corners: NDArray[np.int64], tol: float, g1: bool, method: str,
+    deadline: float | None, chain: ChainFit,
+) -> tuple[ChainFit, tuple[NDArray[np.float64], list[bool], float, float] | None]:
+    """The plain fit and its untangling (:func:`_untangle`), the fit redone with converged
+    pieces where untangling patched crack-polygon lines in.
+
+    Steps: 1. untangle ``chain``; 2. if that made the loop longer (pieces of the break
+    search's few rounds, :data:`PIECE_ROUNDS`, looped or crossed and their span became
+    crack lines), fit the loop again with :data:`NEWTON_ROUNDS` (converged pieces bend
+    less freely at their ends) and untangle that; 3. keep the shorter untangled loop (the
+    first on ties).
+    """
+    lines = list(chain.lines) or [False] * len(chain.curves)
+    untangled = _untangle(pts, _close_gaps(chain.curves), lines, tol)
+    if untangled is None or len(untangled[0]) <= len(chain.curves):
+        return chain, untangled
+    again = _plain_fit(pts, corners, tol, g1, method, deadline, NEWTON_ROUNDS)
+    lines = list(again.lines) or [False] * len(again.curves)
+    redone = _untangle(pts, _close_gaps(again.curves), lines, tol)
+    if len(again.curves if redone is None else redone[0]) < len(untangled[0]):
+        return again, redone
+    return chain, untangled
 
 
 def _symmetric_outline(pts: NDArray[np.float64], found: tuple, tol: float) -> tuple | None:
