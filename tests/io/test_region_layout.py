@@ -108,3 +108,38 @@ def test_a_mesh_without_creases_has_no_region_layout(tmp_path: Path) -> None:
     trimesh.creation.icosphere(4).export(path)
     surface = read_surface(path, sample_points=5000)
     assert region_layout(surface, (surface.vertices, surface.triangles)) is None
+
+
+def _box_cloud_report(tmp_path: Path) -> tuple[dict, list[str], object]:
+    """A 2 x 1.4 x 1 box's 30k clean samples (no faces) through reconstruct_auto, C1."""
+    from pde2cad.io.meshes import reconstruct_auto
+    from pde2cad.report import build_report
+    from pde2cad.occ import write_step
+
+    box = trimesh.creation.box(extents=(2.0, 1.4, 1.0))
+    points = trimesh.sample.sample_surface(box, 30_000, seed=1)[0]
+    path = tmp_path / "box.xyz"
+    np.savetxt(path, points)
+    said: list[str] = []
+    rec, layout = reconstruct_auto(read_surface(path), continuity="c1", message=said.append)
+    report = build_report(rec, write_step(rec.shape, tmp_path / "box.step"), orthogonal=False)
+    return report, said, layout
+
+
+def test_a_clean_cloud_of_a_box_takes_its_crease_regions(tmp_path: Path) -> None:
+    """A cloud without faces is laid out by its crease regions (cloud_regions, no Poisson
+    guide): the box's 6 faces, a valid solid, its 12 edges kept as creases, the points on
+    the faces (measured: mean 2.9e-4 of the diagonal for the worst face)."""
+    report, said, layout = _box_cloud_report(tmp_path)
+    assert layout.summary["kind"] == "crease regions" and layout.summary["patches"] == 6
+    assert not any("guide mesh" in line for line in said)
+    s = report["summary"]
+    assert s["valid"] and s["solid"] and s["n_faces"] == 6 and s["max_gap_rel"] <= 1e-7
+    assert s["crease_edges"] == 12 and s["mean_error_rel"] <= 1e-3
+
+
+@pytest.mark.xfail(strict=True, reason="a cloud's crease edges are not yet kept at 90 deg all "
+                   "along: measured 41-97 deg on this box (labelled or mesh inputs: 80-97)")
+def test_a_clean_cloud_of_a_box_keeps_its_right_angles(tmp_path: Path) -> None:
+    lo, hi = _box_cloud_report(tmp_path)[0]["summary"]["crease_angle_deg"]
+    assert 80.0 <= lo and hi <= 100.0

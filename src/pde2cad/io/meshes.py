@@ -307,9 +307,8 @@ def _decimated(v: NDArray[np.float32], f: NDArray[np.int32]) -> tuple[Any, Any]:
             np.ascontiguousarray(np.asarray(half.triangles), dtype=np.int32))
 
 
-def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64] | None,
-                triangles: NDArray[np.int64] | None, patches: int | None,
-                patch_size: float | None) -> int:
+def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64],
+                triangles: NDArray[np.int64], patches: int | None, patch_size: float | None) -> int:
     """Patches to ask for: ``patches``; or area / ``patch_size``^2; or by default by curvature.
 
     By default area / L^2 with side L = ``TURN_PER_PATCH`` x a small radius of curvature
@@ -324,25 +323,13 @@ def patch_count(points: NDArray[np.float64], vertices: NDArray[np.float64] | Non
     """
     if patches is not None:
         return int(patches)
-    area = (_area(vertices, triangles) if vertices is not None and triangles is not None
-            else _cloud_area(points))
+    area = _area(vertices, triangles)
     if patch_size is not None:
         return int(np.clip(area / patch_size**2, 1, 4 * PATCH_RANGE[1]))
     side = TURN_PER_PATCH * curvature_radius_of_points(points, CURVATURE_PERCENTILE)
     wanted = area / side**2 if np.isfinite(side) else 0.0
     most = min(PATCH_RANGE[1], len(points) // MIN_POINTS_PER_PATCH)
     return int(np.clip(wanted, PATCH_RANGE[0], max(most, PATCH_RANGE[0])))
-
-
-def _cloud_area(points: NDArray[np.float64]) -> float:
-    """Area a cloud covers: ``ln 2 / (pi r^2)`` points per unit area have a median
-    nearest-neighbour distance ``r`` when spread at random (Poisson), so about
-    ``N pi r^2 / ln 2``, ``r`` measured on a subsample of ~2000 points."""
-    from scipy.spatial import cKDTree
-
-    sub = points[:: max(1, len(points) // 2000)]
-    r = float(np.median(cKDTree(points).query(sub, k=2)[0][:, 1]))
-    return len(points) * np.pi * r * r / np.log(2.0)
 
 
 def _area(vertices: NDArray[np.float64], triangles: NDArray[np.int64]) -> float:
@@ -569,8 +556,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     2. The guide mesh (:func:`guide_mesh`) is made once for all layouts.
     3. A mesh with creases first tries its crease-bounded regions as segments
        (:func:`_region_attempt`): the creases are then patch borders exactly and keep their
-       dihedral angles (a filleted box with a hole: 78-96 deg for 90; a remeshed layout
+       dihedral angles (a filleted box with a hole: 80-97 deg for 90; a remeshed layout
        was rejected there after 80 s, the knob's took 60 s). Kept when it fits the points.
+       A cloud's regions come from :func:`cloud_regions` (no guide mesh is built for them).
     4. A layout the pipeline rejects (a segment whose points fall apart in the pipeline's
        neighbour graph, seen on a scan with 4x density changes; a side lost) is remeshed;
        after a rejected crease-bounded layout, across the creases (``NO_CREASES``: faceting
