@@ -459,6 +459,10 @@ def _layout_line(layout: dict[str, Any]) -> str:
     valence = ", ".join(f"{c} of valence {v}" for v, c in layout["corner_valence"].items())
     creases = "" if layout.get("creases") is None else f", {layout['creases']} crease edges in input"
     if layout.get("kind") == "crease regions":
+        told = layout.get("crease_angle_told")
+        if told is not None:  # a cloud: its noise may hide the gentler creases
+            creases += (f", creases of {told:g} deg or more told (point noise "
+                        f"{layout.get('noise', 0.0):.2g})")
         return (f"layout: auto, the {layout['patches']} crease-bounded regions as segments "
                 f"(split into 3/4-sided patches below), {layout['components']} component(s){creases}")
     return (f"layout: auto, {layout['patches']} patches ({layout['faces']['quads']} quads, "

@@ -303,6 +303,7 @@ def _check_options(m: object, n: object, continuity: str, tolerance: float | Non
 def _build_network(
     pts: NDArray[np.float64], lab: NDArray[np.int64], continuity: str,
     timings: dict[str, float], progress: Progress | None, corners: KnownCorners | None = None,
+    fenced: bool = False,
 ) -> tuple[NDArray[np.int64], Layout, EdgeNetwork, SplitReport]:
     """Steps 1-2 of :func:`fit_surfaces`: the layout (segments that are no 3/4-sided
     region relabelled into pieces; with known ``corners``, those corners instead), then the
@@ -319,7 +320,7 @@ def _build_network(
         layout, splits = with_known_corners(layout, corners, pts, lab, tree), SplitReport()
     else:
         # Segments with 5+ corners (merged patches, T-junctions) -> 3/4-sided pieces.
-        lab, layout, splits = split_segments(pts, lab, layout, tree)
+        lab, layout, splits = split_segments(pts, lab, layout, tree, fenced)
     timings["layout"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -429,6 +430,7 @@ def fit_surfaces(
     cad_tolerance: float | None = None,
     progress: Progress | None = None,
     corners: KnownCorners | None = None,
+    sharp_borders: bool = False,
 ) -> SurfaceModel:
     """Fit one B-spline surface per segment of a labelled cloud, joined on shared edges.
 
@@ -473,6 +475,9 @@ def fit_surfaces(
         The corners of every segment when the layout knows them (an automatic layout's
         coarse mesh, :mod:`pde2cad.layout.known`): used instead of the corners inferred
         from the labels, and no segment is split.
+    sharp_borders : bool
+        Every border between segments is a sharp edge (crease-bounded regions of a part):
+        the pieces of split segments never merge across them.
 
     Returns
     -------
@@ -484,7 +489,8 @@ def fit_surfaces(
     pts = frame.to_local(world)
     timings: dict[str, float] = {}
     known = None if corners is None else corners.moved(frame.to_local)
-    lab, layout, network, splits = _build_network(pts, lab, continuity, timings, progress, known)
+    lab, layout, network, splits = _build_network(pts, lab, continuity, timings, progress, known,
+                                                  sharp_borders)
 
     t0 = time.perf_counter()
     try:
@@ -528,6 +534,7 @@ def reconstruct(
     cad_tolerance: float | None = None,
     progress: Progress | None = None,
     corners: KnownCorners | None = None,
+    sharp_borders: bool = False,
 ) -> Reconstruction:
     """Reconstruct a segmented cloud as B-spline faces sewn into one OCP shape.
 
@@ -542,6 +549,7 @@ def reconstruct(
     model = fit_surfaces(
         points, labels, m=m, n=n, continuity=continuity, tolerance=tolerance,
         cad_tolerance=cad_tolerance, progress=progress, corners=corners,
+        sharp_borders=sharp_borders,
     )
     from pde2cad.occ.build import build_shape  # OCP is optional: imported only here
 

@@ -773,7 +773,7 @@ def build_edges(
     smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users, max(QUADRIC_RADIUS * radius, 4 * spacing))
     # Creases: shared edges whose two segments' own surfaces meet at an angle along them (a
     # median over the edge's data survives noise that hides the crease at one corner).
-    sheets = _Sheets(pts, lab, tree, SHEET_REACH * radius)
+    sheets = _Sheets(pts, lab, tree, SHEET_REACH * radius, _sheet_neighbours(pts, tree, spacing))
     creases = set()
     for key, who in users.items():
         if len(who) == 2:
@@ -1000,20 +1000,22 @@ class _Sheets:
     segments meet at an angle, the edge is where their surfaces intersect."""
 
     def __init__(
-        self, points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, reach: float
+        self, points: NDArray[np.float64], labels: NDArray[np.int64], tree: cKDTree, reach: float,
+        k: int = MLS_NEIGHBOURS,
     ) -> None:
-        self.points, self.labels, self.tree, self.reach = points, labels, tree, reach
+        self.points, self.labels, self.tree, self.reach, self.k = points, labels, tree, reach, k
 
     def project(
-        self, q: NDArray[np.float64], label: int | list[int], k: int = MLS_NEIGHBOURS
+        self, q: NDArray[np.float64], label: int | list[int], k: int | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:func:`mls_project` of ``q`` onto the points of segment ``label`` (or of the
-        segments listed)."""
+        segments listed), over ``k`` neighbours (default: the sheets' own)."""
         # The segment's points within ``reach`` of the queries only: a tree over a whole
         # segment of a 1e6-point cloud costs more than every query on it.
         rows = self.tree.query_ball_point(q, self.reach)
         idx = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in rows]))
         idx = idx[np.isin(self.labels[idx], label)]
+        k = self.k if k is None else k
         if len(idx) < k:
             idx = np.flatnonzero(np.isin(self.labels, label))
         own = self.points[idx]
@@ -1038,6 +1040,27 @@ class _Sheets:
             inv = np.where(sv > PLANE_RCOND * sv[:, :1], 1.0 / np.maximum(sv, 1e-300), 0.0)
             x = x + np.einsum("qji,qj->qi", vt, inv * np.einsum("qkj,qk->qj", u, r))
         return x
+
+
+def _sheet_neighbours(points: NDArray[np.float64], tree: cKDTree, spacing: float) -> int:
+    """Neighbours of the one-sided quadrics that put edge samples on the surface: enough
+    that their own noise, about ``sigma sqrt(6 / k)`` for 6 coefficients over ``k`` points
+    of noise ``sigma`` (:func:`~pde2cad.layout.creases.surface_noise`), stays within
+    ``SHEET_NOISE`` spacings; ``MLS_NEIGHBOURS`` to ``SHEET_MOST`` (a crease's samples sit
+    at the rim of both quadrics, where a 40-point fit's noise at 0.4 spacings tilted a
+    bracket's sharp edges by 10-80 deg off their 90; 120 kept them within 13)."""
+    from pde2cad.layout.creases import surface_noise
+
+    sigma = surface_noise(points, tree)
+    need = 6.0 * (sigma / (SHEET_NOISE * max(spacing, 1e-300))) ** 2
+    return int(np.clip(np.ceil(need), MLS_NEIGHBOURS, SHEET_MOST))
+
+
+#: Largest noise of a one-sided quadric's projection, in point spacings.
+SHEET_NOISE = 0.08
+#: Most neighbours of a one-sided quadric (its reach, ~sqrt(k / pi) spacings, rounds off
+#: fillets).
+SHEET_MOST = 160
 
 
 def _quadric_rms(points: NDArray[np.float64], frame: NDArray[np.float64], origin: NDArray[np.float64]) -> float:

@@ -133,6 +133,9 @@ class SplitReport:
         by :func:`~pde2cad.layout.rings.split_rings` (their ``corners``: 0).
     loops : dict[int, int]
         Of those, the ones with 3 or more loops (faces with holes) and how many.
+    fenced : bool
+        Whether pieces of different input segments were kept from merging (segments bounded
+        by sharp edges: a merge would round a crease off).
     """
 
     pieces: dict[int, list[int]] = field(default_factory=dict)
@@ -140,6 +143,15 @@ class SplitReport:
     merged: dict[int, int] = field(default_factory=dict)
     rings: list[int] = field(default_factory=list)
     loops: dict[int, int] = field(default_factory=dict)
+    fenced: bool = False
+
+    def apart(self, a: int, b: int) -> bool:
+        """Whether labels ``a`` and ``b`` must not merge: ``fenced`` and pieces of
+        different input segments."""
+        if not self.fenced:
+            return False
+        origin = {p: first for first, pieces in self.pieces.items() for p in pieces}
+        return origin.get(a, a) != origin.get(b, b)
 
     def summary(self) -> str:
         """One line per split label, e.g. ``segment 3: 6 corners -> 2 pieces [3, 9]``."""
@@ -753,7 +765,7 @@ def _merge_tubes(
     tube meeting along two borders; :func:`_split_cornerless` then cuts the union)."""
     _, seg_corners = filter_corners(layout, tree, labels)
     for a, b in sorted(layout.borders):
-        if a in report.merged or b in report.merged:
+        if a in report.merged or b in report.merged or report.apart(a, b):
             continue
         if len(set(seg_corners[a]) & set(seg_corners[b])) <= 2:
             continue
@@ -781,7 +793,7 @@ def _merge_tube_chain(
     ring."""
     _, seg_corners = filter_corners(dataclasses.replace(layout, sharp_corners=None), tree, labels)
     pairs = [(a, b) for a, b in sorted(layout.borders)
-             if len(set(seg_corners[a]) & set(seg_corners[b])) > 2]
+             if len(set(seg_corners[a]) & set(seg_corners[b])) > 2 and not report.apart(a, b)]
     if not pairs:
         return None
     trial = labels.copy()
@@ -803,7 +815,8 @@ def _merge_tube_chain(
             # A ring so narrow that its two loops join (the spout's lip) goes to the tube
             # it ends (another union).
             around = {(q if p == a else p): n for (p, q), n in trial_layout.adjacency.items()
-                      if a in (p, q) and (q if p == a else p) in loops}
+                      if a in (p, q) and (q if p == a else p) in loops
+                      and not report.apart(p, q)}
             if not around:
                 return None
             b = max(around, key=lambda k: around[k])
@@ -828,7 +841,8 @@ def _merge_narrow_rings(
     lip, 2-3 radii wide at 112k points) joins the tube it ends."""
     for label in sorted(np.unique(labels).tolist()):
         loops = boundary_loops(points, labels, tree, label, layout.radius, layout.crossed(label))
-        around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items() if label in (a, b)}
+        around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items()
+                  if label in (a, b) and not report.apart(a, b)}
         if len(loops) != 2 or not around:
             continue
         width = float(np.median(cKDTree(points[loops[0][0]]).query(points[loops[1][0]])[0]))
@@ -855,7 +869,7 @@ def _merge_slivers(
         best = None
         for label in thin:
             around = {(b if a == label else a): n for (a, b), n in layout.adjacency.items()
-                      if label in (a, b)}
+                      if label in (a, b) and not report.apart(a, b)}
             if around:
                 best = (label, max(around, key=lambda k: around[k]))
                 break
@@ -970,6 +984,7 @@ def split_segments(
     labels: NDArray[np.int64],
     layout: Layout,
     tree: cKDTree,
+    fenced: bool = False,
 ) -> tuple[NDArray[np.int64], Layout, SplitReport]:
     """Split every segment with more than 4 corners into 3/4-sided pieces (in up to
     ``MAX_ROUNDS`` rounds: a strip cut makes a T-node on the next segment of the strip).
@@ -982,6 +997,10 @@ def split_segments(
         :func:`~pde2cad.layout.adjacency.build_layout` of ``points``, ``labels``.
     tree : cKDTree
         Of ``points``.
+    fenced : bool
+        The segments are bounded by sharp edges (crease-bounded regions): pieces of
+        different segments never merge (a thin region or a noisy border otherwise reads as
+        a sliver or half a tube and joins its neighbour across the crease).
 
     Returns
     -------
@@ -997,7 +1016,7 @@ def split_segments(
         A piece of a split segment still not 3/4-sided after the rounds, or a segment with
         more than ``MAX_CORNERS`` corners (the message names the label).
     """
-    report = SplitReport()
+    report = SplitReport(fenced=fenced)
     relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency))
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
