@@ -375,3 +375,14 @@ def test_torus_region_growing_by_normals(tmp_path: Path) -> None:
     assert len(rec.splits.rings) == 2 and rec.c0_fallback == []
     m = _check(rec, cloud, tmp_path, 1.0)
     assert m["n_faces"] == 16 and m["free_edges"] == 0
+
+
+def test_fenced_split_keeps_pieces_of_different_segments_apart() -> None:
+    """With ``fenced`` (crease-bounded regions) no merge may join pieces of two input
+    segments; pieces of one segment and unsplit labels follow their origin."""
+    from pde2cad.layout.split import SplitReport
+
+    report = SplitReport(pieces={0: [0, 5, 6], 1: [1, 7]}, fenced=True)
+    assert report.apart(5, 7) and report.apart(0, 1) and report.apart(6, 2)
+    assert not report.apart(5, 6) and not report.apart(0, 6) and not report.apart(1, 7)
+    assert not SplitReport(pieces={0: [0, 5], 1: [1, 7]}).apart(5, 7)
