@@ -656,7 +656,7 @@ def _border_span(
 def _borders(
     pts: NDArray[np.float64], tree: cKDTree, lab: NDArray[np.int64], present: NDArray[np.int64],
     near: NDArray[np.int64], idx: NDArray[np.int64], valid: NDArray[np.bool_], radius: float,
-    memo: dict[tuple[object, ...], object], digest: dict[int, int],
+    memo: dict[tuple[object, ...], object], digest: dict[int, int], find_crossing: bool = True,
 ) -> tuple[dict[tuple[int, int], int], dict[tuple[int, int], NDArray[np.float64]],
            NDArray[np.bool_], list[tuple[int, int]], dict[tuple[int, int], tuple[int, NDArray[np.float64]]]]:
     """Step 2 of the module docstring: adjacency, border points and whether each point is one
@@ -664,7 +664,7 @@ def _borders(
     touch instead of sharing a boundary (:func:`_crossing`), left out, then ``(-1, -1)`` and
     the pairs where the surface goes on past the border (one-sidedness below
     ``EDGE_SHARE``); and the pairs left out as too short (their edge counts and border
-    points)."""
+    points). No pair crosses unless ``find_crossing``."""
     # Cross edges, each unordered point pair once.
     k = idx.shape[1]
     rows = np.repeat(near, k)
@@ -701,7 +701,7 @@ def _borders(
         share, rise = cast("tuple[float, float]", memo[seen])
         if share < EDGE_SHARE:
             weak.append((a, b))
-        if share < EDGE_SHARE and rise >= EDGE_RISE:
+        if share < EDGE_SHARE and rise >= EDGE_RISE and find_crossing:
             crossing.append((a, b))
         elif span > BORDER_SPAN * radius:
             adjacency[(a, b)] = int(edge_count[p])
@@ -1002,6 +1002,7 @@ def build_layout(
     min_points: int = 50,
     check: bool = True,
     crossing: Iterable[tuple[int, int]] = (),
+    find_crossing: bool = True,
 ) -> Layout:
     """Adjacency, borders, open boundary and corners of a segmented point cloud.
 
@@ -1019,6 +1020,10 @@ def build_layout(
     crossing : iterable of (int, int)
         Label pairs known to cross or touch without sharing a boundary (pieces of segments
         that an earlier layout found crossing), besides those found here.
+    find_crossing : bool
+        Look for such pairs (``False``: only ``crossing`` cross; pieces of segments bounded
+        by sharp edges, where a short border of a hole's wall piece near the corners of the
+        face's pieces reads as a wall rising through a face that goes on past it).
 
     Returns
     -------
@@ -1060,7 +1065,8 @@ def build_layout(
     dist, idx = dist[:, 1:], idx[:, 1:].astype(np.int64)
     valid = dist <= radius
 
-    adjacency, borders, is_border, crossing, short = _borders(pts, tree, lab, present, near, idx, valid, radius, memo, digest)
+    adjacency, borders, is_border, crossing, short = _borders(
+        pts, tree, lab, present, near, idx, valid, radius, memo, digest, find_crossing)
     weak = crossing[crossing.index((-1, -1)) + 1 :]
     crossing = crossing[: crossing.index((-1, -1))] + [
         (a, b) for a, b in known if a in present and b in present

@@ -730,16 +730,18 @@ Relayout = Callable[[NDArray[np.int64]], Layout]
 
 def _relayouter(
     points: NDArray[np.float64], first: NDArray[np.int64], crossing: frozenset[tuple[int, int]],
-    adjacent: set[tuple[int, int]],
+    adjacent: set[tuple[int, int]], fenced: bool = False,
 ) -> Relayout:
     """A function building the layout of new labels of ``points`` whose segments cross where
     the input segments they hold (``first``, at least ``SOURCE_SHARE`` of their points)
     did, unless two of those shared a border (``adjacent``): a piece of the teapot's handle
-    still crosses the body, wherever it lies."""
+    still crosses the body, wherever it lies. ``fenced`` (segments bounded by sharp
+    edges): no other pieces cross (a flange face's piece read as crossing the wall of the
+    bolt hole it ends at, and lost that side)."""
 
     def relayout(labels: NDArray[np.int64]) -> Layout:
         if not crossing:
-            return build_layout(points, labels, check=False)
+            return build_layout(points, labels, check=False, find_crossing=not fenced)
         present = np.unique(labels)
         held: dict[int, set[int]] = {}
         for label in present.tolist():
@@ -751,7 +753,8 @@ def _relayouter(
         # Crossing where some input segments they hold crossed and none shared a border.
         known = [(a, b) for i, a in enumerate(present.tolist()) for b in present.tolist()[i + 1:]
                  if pairs(a, b) & crossing and not pairs(a, b) & adjacent]
-        return build_layout(points, labels, check=False, crossing=known)
+        return build_layout(points, labels, check=False, crossing=known,
+                            find_crossing=not fenced)
 
     return relayout
 
@@ -1017,7 +1020,7 @@ def split_segments(
         more than ``MAX_CORNERS`` corners (the message names the label).
     """
     report = SplitReport(fenced=fenced)
-    relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency))
+    relayout = _relayouter(points, labels, layout.crossing, set(layout.adjacency), fenced)
     out = labels
     source: dict[int, int] = {}  # piece label -> input label
     out = _cut_rings(points, out, layout, tree, report, int(labels.max()) + 1)
