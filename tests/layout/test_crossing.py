@@ -38,3 +38,16 @@ def test_full_teapot_handle_and_spout_cross_the_body() -> None:
     assert {report.merged[k] for k in (13, 15, 17, 18, 19)} == {12, 14, 16}
     _, corners = filter_corners(split, split.tree, labels)
     assert all(len(ids) in (3, 4) for ids in corners.values())
+
+
+def test_crossing_search_can_be_turned_off() -> None:
+    """``find_crossing=False`` (pieces of crease-bounded regions): only the pairs passed in
+    (and the neighbours they spread to) cross; none without them."""
+    cloud = samples.teapot(40_000, parts=("body", "handle"))
+    found = build_layout(cloud.points, cloud.labels, check=False)
+    assert any(a in BODY and b in HANDLE for a, b in found.crossing)
+    off = build_layout(cloud.points, cloud.labels, check=False, find_crossing=False)
+    assert not off.crossing
+    given = [p for p in sorted(found.crossing) if p[0] in BODY and p[1] in HANDLE][:1]
+    assert set(given) <= set(build_layout(cloud.points, cloud.labels, check=False,
+                                          crossing=given, find_crossing=False).crossing)
