@@ -104,7 +104,8 @@ REFLEX_ANGLE = 245.0
 #: A corner is reflex when the loop turns clockwise there about a normal within
 #: arccos(REFLEX_COS) of the (counter-clockwise oriented) PCA normal.
 REFLEX_COS = 0.5
-#: Split rounds (each builds the layout again): strip cuts move a T-node along a strip.
+#: Split rounds (each builds the layout again): strip cuts move a T-node along a strip;
+#: the main split takes at least as many rounds as there are pieces when it starts.
 MAX_ROUNDS = 12
 #: A tube (merged halves) whose two boundary loops lie closer than NARROW_RING radii (median)
 #: is merged into the neighbour it shares the most border with.
@@ -990,7 +991,8 @@ def split_segments(
     fenced: bool = False,
 ) -> tuple[NDArray[np.int64], Layout, SplitReport]:
     """Split every segment with more than 4 corners into 3/4-sided pieces (in up to
-    ``MAX_ROUNDS`` rounds: a strip cut makes a T-node on the next segment of the strip).
+    ``MAX_ROUNDS`` rounds, or one per piece when there are more: a strip cut makes a T-node
+    on the next segment of the strip).
 
     Parameters
     ----------
@@ -1039,7 +1041,9 @@ def split_segments(
     if out is not merged:
         layout = _add_sharp_turns(points, out, relayout(out), tree)
     source = {p: first for first, pieces in report.pieces.items() for p in pieces}
-    for _ in range(MAX_ROUNDS):
+    # A strip cut moves its T-node on through every piece of the strip, one per round: a
+    # tube's faces cut into ~90 pieces (OCCT's sh1.stl) took 20 rounds.
+    for _ in range(max(MAX_ROUNDS, len(np.unique(out)))):
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
         todo = _apart(layout, [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4])
