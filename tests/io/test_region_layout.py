@@ -162,3 +162,44 @@ def test_a_noisy_cloud_of_a_box_takes_its_crease_regions(tmp_path: Path) -> None
     assert 65.0 <= lo and hi <= 115.0
     # Gaussian noise of sigma lies 0.8 sigma off the true faces on average.
     assert s["mean_error_rel"] <= 0.8 * 0.002 + 1e-3
+
+
+def _noisy_holed_box(tmp_path: Path) -> tuple[object, float]:
+    """The holed box as 40k points with 0.2 % noise of the diagonal, read as a cloud (no
+    faces), and its diagonal."""
+    mesh = read_surface(_holed_box(tmp_path / "box.stl"), sample_points=40_000)
+    diagonal = float(np.linalg.norm(mesh.points.max(0) - mesh.points.min(0)))
+    noisy = mesh.points + np.random.default_rng(5).normal(0.0, 0.002 * diagonal, mesh.points.shape)
+    np.savetxt(tmp_path / "box.xyz", noisy)
+    return read_surface(tmp_path / "box.xyz"), diagonal
+
+
+def test_a_noisy_cloud_of_a_holed_box_tells_its_crease_regions(tmp_path: Path) -> None:
+    """Through 0.2 % noise (before: no regions at all) the holed box's 4 regions, each one
+    face (side band with its fillets, top, bottom, the hole's wall): the regions of the
+    noisy points agree with the mesh's own regions on 95 % of the points at least."""
+    surface, diagonal = _noisy_holed_box(tmp_path)
+    layout = region_layout(surface, None)
+    assert layout is not None and layout.summary["patches"] == 4
+    assert layout.summary["crease_angle_told"] >= 30.0
+    assert layout.summary["noise"] == pytest.approx(0.002 * diagonal, rel=0.15)
+    mesh = read_surface(tmp_path / "box.stl", sample_points=40_000)
+    truth = region_layout(mesh, (mesh.vertices, mesh.triangles)).labels
+    agree = sum(np.bincount(truth[layout.labels == r]).max() for r in range(4))
+    assert agree >= 0.95 * len(truth)
+
+
+@pytest.mark.xfail(strict=True, reason="~2 % of the crease band's points go to the wrong face "
+                   "near the fillets and the hole (up to 0.036 D off): a patch's mean reaches "
+                   "3.0e-3 D, over the 1e-3 D + noise a region result must meet (a 60 x 40 x 30 "
+                   "box with r 6 fillets passes: 12 faces, creases 62-105 deg)")
+def test_a_noisy_cloud_of_a_holed_box_fits_its_crease_regions(tmp_path: Path) -> None:
+    from pde2cad.io.meshes import REGION_MEAN
+    from pde2cad.reconstruct import reconstruct
+
+    surface, diagonal = _noisy_holed_box(tmp_path)
+    layout = region_layout(surface, None)
+    rec = reconstruct(surface.points, layout.labels, continuity="c1", sharp_borders=True)
+    worst = max(float(np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
+                                     axis=1).mean()) for p in rec.patches.values())
+    assert worst <= (REGION_MEAN + layout.summary["noise"] / diagonal) * diagonal
