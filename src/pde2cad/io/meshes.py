@@ -560,7 +560,8 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
     3. A mesh with creases first tries its crease-bounded regions as segments
        (:func:`_region_attempt`): the creases are then patch borders exactly and keep their
        dihedral angles (a filleted box with a hole: 80-97 deg for 90; a remeshed layout
-       was rejected there after 80 s, the knob's took 60 s). Kept when it fits the points.
+       was rejected there after 80 s, the knob's took 60 s). Kept when it fits the points;
+       else kept aside, and returned when every remeshed layout is rejected or folds.
        A cloud's regions come from :func:`cloud_regions` (no guide mesh is built for them).
     4. A layout the pipeline rejects (a segment whose points fall apart in the pipeline's
        neighbour graph, seen on a scan with 4x density changes; a side lost) is remeshed;
@@ -587,10 +588,14 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
             point_triangles=None if surface.point_triangles is None else surface.point_triangles[pick])
         say(f"fitting a random {FIT_POINTS} of the {len(full.points)} points")
     mesh = None if surface.triangles is None else guide_mesh(surface)
+    spare: tuple[object, AutoLayout] | None = None
     if crease_angle < NO_CREASES:
         first = _region_attempt(surface, mesh, patches, patch_size, crease_angle, kwargs, say)
-        if first is not None:
+        if first is not None and first[2]:
             return first[0], _all_points(first[1], surface, full)
+        # Kept in case every remeshed layout is rejected or folds: its faces miss some
+        # points, but its creases are the part's.
+        spare = None if first is None else (first[0], first[1])
     if surface.triangles is None:
         say(f"guide mesh: normals and Poisson on {min(len(surface.points), GUIDE_POINTS)} points")
     guide = mesh if mesh is not None else guide_mesh(surface)
@@ -605,6 +610,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
                               **kwargs)  # type: ignore[arg-type]
         except InputError as exc:
             if attempt == ATTEMPTS - 1 and best is None:
+                if spare is not None:
+                    say(f"layout {attempt + 1} rejected ({exc}); keeping the crease regions")
+                    return spare[0], _all_points(spare[1], surface, full)
                 raise InputError(f"the automatic layout failed: {exc}") from exc
             if layout.summary.get("creases"):
                 # Faceting read as creases (a coarse organic mesh) misleads the remesher.
@@ -625,6 +633,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
             say(f"layout {attempt + 1} folds (seam angle {fold:.0f} deg); remeshing with "
                 f"{FINER}x the patches")
     assert best is not None
+    if spare is not None and best[0] > FOLD_ANGLE:
+        say(f"the remeshed layouts fold (seam angle {best[0]:.0f} deg); keeping the crease regions")
+        return spare[0], _all_points(spare[1], surface, full)
     return best[1], _all_points(best[2], surface, full)
 
 
@@ -632,13 +643,13 @@ def _region_attempt(
     surface: Surface, guide: tuple[NDArray[np.float64], NDArray[np.int64]] | None,
     patches: int | None, patch_size: float | None, crease_angle: float,
     kwargs: dict[str, object], say: Callable[[str], None],
-) -> tuple[object, AutoLayout] | None:
-    """:func:`region_layout` reconstructed, or None where it has no creases, the pipeline
-    rejects it (a region it cannot split) or its patches miss the points (a large curved
-    region, cut into a few pieces, that a remeshed layout sizes by its curvature instead):
-    a patch whose points lie farther than ``REGION_MEAN`` (plus a cloud's noise) from it on
-    average, or more than ``REGION_FAR`` of all points beyond ``REGION_FAR_DISTANCE`` (x
-    the diagonal)."""
+) -> tuple[object, AutoLayout, bool] | None:
+    """:func:`region_layout` reconstructed, or None where it has no creases or the pipeline
+    rejects it (a region it cannot split); the last item says whether its patches fit the
+    points, False where they miss them (a large curved region, cut into a few pieces, that
+    a remeshed layout sizes by its curvature instead): a patch whose points lie farther than
+    ``REGION_MEAN`` (plus a cloud's noise) from it on average, or more than ``REGION_FAR``
+    of all points beyond ``REGION_FAR_DISTANCE`` (x the diagonal)."""
     from pde2cad.reconstruct import reconstruct
 
     layout = region_layout(surface, guide, patches=patches, patch_size=patch_size,
@@ -660,8 +671,8 @@ def _region_attempt(
     if worst > REGION_MEAN + noise or np.mean(np.concatenate(dist) > REGION_FAR_DISTANCE) > REGION_FAR:
         say(f"crease regions miss the points (a patch's mean distance {worst:.1e} x the "
             "diagonal); laying out patches instead")
-        return None
-    return rec, layout
+        return rec, layout, False
+    return rec, layout, True
 
 
 def _all_points(layout: AutoLayout, fitted: Surface, full: Surface) -> AutoLayout:
