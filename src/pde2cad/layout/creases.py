@@ -231,6 +231,12 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
        of fewer than ``min_points`` points (speckle along a crease) count as crease points.
     4. Crease points take the region whose plane through its nearest points lies nearest
        (:func:`_band_regions`).
+
+    Returns
+    -------
+    CloudRegions or None
+        Region id per point (0 .. R-1, R >= 2), the crease angle told, the neighbour count
+        and the noise estimate.
     """
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
