@@ -584,3 +584,15 @@ def test_summary_names_c0_fallback_patches_and_unmatched_corners() -> None:
     text = "\n".join(summary_lines({"summary": summary, "patches": patches}))
     assert "2 of 3 patches have fewer than 1000 points (segment 4: 449)" in text
     assert "fewer than" not in "\n".join(summary_lines({"summary": summary, "patches": patches[:1]}))
+
+
+def test_layout_line_says_which_creases_a_noisy_cloud_told() -> None:
+    """A cloud's crease regions: the summary's layout line gives the crease angle the noise
+    let it tell and the noise; a mesh's line has neither."""
+    from pde2cad.cli import _layout_line
+
+    layout = {"patches": 6, "faces": {"quads": 0, "triangles": 0}, "corner_valence": {},
+              "components": 1, "creases": None, "kind": "crease regions"}
+    assert "told" not in _layout_line(layout)
+    line = _layout_line({**layout, "crease_angle_told": 45.0, "noise": 0.0052})
+    assert "creases of 45 deg or more told (point noise 0.0052)" in line

@@ -203,3 +203,29 @@ def test_a_noisy_cloud_of_a_holed_box_fits_its_crease_regions(tmp_path: Path) ->
     worst = max(float(np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points,
                                      axis=1).mean()) for p in rec.patches.values())
     assert worst <= (REGION_MEAN + layout.summary["noise"] / diagonal) * diagonal
+
+
+def test_crease_regions_that_miss_are_kept_when_every_remeshed_layout_fails(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A crease-region result rejected for missing points is kept aside and returned when
+    the remeshed layouts are all rejected (here: forced), not an error."""
+    import pde2cad.io.meshes as meshes
+    import pde2cad.reconstruct as recon
+    from pde2cad.errors import InputError
+
+    real = recon.reconstruct
+
+    def only_regions(*args: object, **kwargs: object) -> object:
+        if not kwargs.get("sharp_borders"):
+            raise InputError("forced: a remeshed layout rejected")
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(meshes, "REGION_MEAN", -1.0)  # every region result "misses"
+    monkeypatch.setattr(meshes, "ATTEMPTS", 1)
+    monkeypatch.setattr(recon, "reconstruct", only_regions)
+    report, said, layout = _box_cloud_report(tmp_path)
+    assert any("miss the points" in line for line in said)
+    assert any("keeping the crease regions" in line for line in said)
+    assert layout.summary["kind"] == "crease regions" and layout.summary["patches"] == 6
+    assert report["summary"]["solid"] and report["summary"]["crease_edges"] == 12

@@ -255,3 +255,26 @@ def test_cloud_regions_of_a_cube_are_its_six_faces() -> None:
     # may go to the next face: beyond it every region is one face.
     _face_purity(pts, found.labels, np.sqrt(found.neighbours / np.pi) * spacing)
     assert cloud_regions(pts + rng.normal(0.0, spacing, pts.shape), 30.0, 240) is None
+
+
+def test_surface_noise_reads_the_noise_not_the_curvature() -> None:
+    """The quadric residual reads a noisy sphere's noise to 10 % and a clean, sparse torus's
+    curvature as almost none (a plane residual would read its sag); the crease-edge quadrics
+    take 40 neighbours on clean clouds and more, up to 160, on noisy ones."""
+    from scipy.spatial import cKDTree
+
+    from pde2cad import samples
+    from pde2cad.layout.creases import surface_noise
+    from pde2cad.layout.edges import MLS_NEIGHBOURS, SHEET_MOST, _sheet_neighbours
+
+    rng = np.random.default_rng(4)
+    ball = rng.normal(size=(20000, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
+    noisy = ball + rng.normal(0.0, 0.01, ball.shape)
+    assert surface_noise(noisy, cKDTree(noisy)) == pytest.approx(0.01, rel=0.1)
+    torus = samples.torus(8000, seed=1).points
+    diagonal = float(np.linalg.norm(np.ptp(torus, axis=0)))
+    assert surface_noise(torus, cKDTree(torus)) < 1e-4 * diagonal
+    spacing = float(np.median(cKDTree(ball).query(ball, k=2)[0][:, 1]))
+    assert _sheet_neighbours(ball, cKDTree(ball), spacing) == MLS_NEIGHBOURS
+    assert _sheet_neighbours(noisy, cKDTree(noisy), spacing) == SHEET_MOST
