@@ -229,3 +229,73 @@ def test_crease_regions_that_miss_are_kept_when_every_remeshed_layout_fails(
     assert any("keeping the crease regions" in line for line in said)
     assert layout.summary["kind"] == "crease regions" and layout.summary["patches"] == 6
     assert report["summary"]["solid"] and report["summary"]["crease_edges"] == 12
+
+
+def test_crease_regions_that_fold_give_way_to_the_remeshed_layouts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A crease-region result with a seam past FOLDED_SEAM (here: the box's own 90-deg
+    edges, the limit lowered to 80) is not taken at once: the remeshed layouts are tried,
+    and it is returned only when they are all rejected."""
+    import pde2cad.io.meshes as meshes
+    import pde2cad.reconstruct as recon
+    from pde2cad.errors import InputError
+
+    real = recon.reconstruct
+    tried: list[bool] = []
+
+    def only_regions(*args: object, **kwargs: object) -> object:
+        tried.append(bool(kwargs.get("sharp_borders")))
+        if not kwargs.get("sharp_borders"):
+            raise InputError("forced: a remeshed layout rejected")
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(meshes, "FOLDED_SEAM", 80.0)
+    monkeypatch.setattr(meshes, "ATTEMPTS", 1)
+    monkeypatch.setattr(recon, "reconstruct", only_regions)
+    report, said, layout = _box_cloud_report(tmp_path)
+    assert tried == [True, False]
+    assert any("crease regions fold (seam angle" in line for line in said)
+    assert any("keeping the crease regions" in line for line in said)
+    assert layout.summary["kind"] == "crease regions"
+    assert report["summary"]["solid"] and report["summary"]["crease_edges"] == 12
+
+
+def test_a_c_shaped_wall_is_halved_where_one_patch_would_turn_too_far(tmp_path: Path) -> None:
+    """A tube wall (r 1 and 0.8, height 0.8) with a 0.6-wide slot cut out: its outer and
+    inner faces turn by ~320 degrees, which no patch can take (before: refused, "2 corners",
+    and the remeshed layouts with it). Each is halved across its length (the neighbours'
+    T-nodes carried along their strips), and every piece is one patch again."""
+    from pde2cad.layout.adjacency import plane_score
+    from pde2cad.layout.split import WIDE_COS
+    from pde2cad.occ import write_step
+    from pde2cad.reconstruct import reconstruct
+    from pde2cad.report import build_report
+    from scipy.spatial import cKDTree
+
+    part = (bd.Cylinder(1, 0.8) - bd.Cylinder(0.8, 1)
+            - bd.Box(2, 0.6, 2, align=(bd.Align.MIN, bd.Align.CENTER, bd.Align.CENTER)))
+    path = tmp_path / "cwall.stl"
+    bd.export_stl(part, str(path), tolerance=1e-3, angular_tolerance=0.1)
+    surface = read_surface(path, sample_points=40_000)
+    layout = region_layout(surface, (surface.vertices, surface.triangles))
+    assert layout is not None and layout.summary["patches"] == 6
+    rec = reconstruct(surface.points, layout.labels, continuity="c1", sharp_borders=True)
+    report = build_report(rec, write_step(rec.shape, tmp_path / "cwall.step"), orthogonal=False)
+    s = report["summary"]
+    assert s["valid"] and s["solid"] and s["max_gap_rel"] <= 1e-7
+    # Both round walls are cut, and no piece turns past what the split allows.
+    walls = [label for label in np.unique(layout.labels)
+             if np.ptp(surface.points[layout.labels == label, 2]) > 0.7
+             and (layout.labels == label).sum() > 0.2 * len(layout.labels)]
+    assert len(walls) == 2 and all(len(rec.splits.pieces.get(w, [])) >= 2 for w in walls)
+    tree = cKDTree(surface.points)
+    for p in rec.patches.values():
+        members = tree.query(p.points)[1]
+        assert plane_score(surface.points, members, tree) >= WIDE_COS
+    # Sharp edges 68-108 deg for 90 (the slot's end faces are 0.2 wide, ~7 point spacings).
+    _assert_creases(report, rec, {90.0}, slack=25.0)
+    dist = np.concatenate([np.linalg.norm(p.evaluate(p.params[:, 0], p.params[:, 1]) - p.points, axis=1)
+                           for p in rec.patches.values()])
+    diagonal = float(np.linalg.norm(np.ptp(surface.points, axis=0)))
+    assert dist.mean() <= 1e-3 * diagonal and np.mean(dist > 0.01 * diagonal) < 0.01

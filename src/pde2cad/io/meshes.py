@@ -268,8 +268,8 @@ def quad_remesh(
     80, 50, 80, 114 faces for 13-16 asked), not from the threads' chance. The remesher
     also returns nothing, at any face count tried (6-14), on some Poisson meshes (a noisy,
     unevenly dense sphere scan's, 82k triangles), and gives a layout on the same mesh
-    decimated to half its triangles; so an empty result is retried on the mesh decimated by
-    half (open3d quadric decimation) and with 1.5x faces.
+    decimated to half its triangles; so an empty result (or the remesher's own error) is
+    retried on the mesh decimated by half (open3d quadric decimation) and with 1.5x faces.
     """
     try:
         import pyinstantmeshes as pim
@@ -283,9 +283,14 @@ def quad_remesh(
     target = max(2, int(round(patches / 4))) + variant
     for _ in range(REMESH_TRIES):
         for deterministic in (True, False):
-            out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
-                                       crease_angle=float(crease_angle), pure_quad=True,
-                                       deterministic=deterministic)
+            try:
+                out_v, out_f = _quiet_call(pim.remesh, v, f, target_face_count=target,
+                                           crease_angle=float(crease_angle), pure_quad=True,
+                                           deterministic=deterministic)
+            except RuntimeError:
+                # "Internal error in extraction" (OCCT's sh2.stl, 50k clean samples' guide
+                # mesh): no layout from this try, as an empty result.
+                continue
             if len(out_f):
                 return np.asarray(out_v, dtype=np.float64), dissolve_doublets(quads_of(out_f))
         target = int(target * 1.5) + 1
@@ -535,6 +540,11 @@ ATTEMPTS = 3
 #: stay below 4 deg); the layout is then tried again with FINER x the patches.
 FOLD_ANGLE = 10.0
 FINER = 1.5
+#: On a part with creases, a seam whose faces' normals differ by more than this (degrees)
+#: is a fold, not a crease (its faces turn back on each other, as a knife edge of 15 deg
+#: would; measured: 178 deg where thin faces of OCCT's shape.stl came out folded). Such a
+#: result is a last resort: the other layouts are tried first.
+FOLDED_SEAM = 165.0
 
 
 def _fold_angle(rec: object) -> float:
@@ -569,7 +579,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
        of a coarse organic mesh read as creases misleads the remesher).
     5. On a surface without creases, a result with a seam angle above ``FOLD_ANGLE`` (a face
        folded at a corner, or turning too far) is remeshed with ``FINER`` x the patches;
-       the result with the smallest such angle is kept.
+       the result with the smallest such angle is kept. On one with creases, only a seam
+       above ``FOLDED_SEAM`` is a fold; the crease regions are returned when every other
+       layout is rejected or folds.
 
     Returns
     -------
@@ -621,9 +633,9 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
             else:
                 say(f"layout {attempt + 1} rejected ({exc}); remeshing")
             continue
-        if layout.summary.get("creases"):
-            return rec, _all_points(layout, surface, full)
         fold = _fold_angle(rec)
+        if layout.summary.get("creases") and fold <= FOLDED_SEAM:
+            return rec, _all_points(layout, surface, full)
         if best is None or fold < best[0]:
             best = (fold, rec, layout)
         if fold <= FOLD_ANGLE:
@@ -649,7 +661,8 @@ def _region_attempt(
     points, False where they miss them (a large curved region, cut into a few pieces, that
     a remeshed layout sizes by its curvature instead): a patch whose points lie farther than
     ``REGION_MEAN`` (plus a cloud's noise) from it on average, or more than ``REGION_FAR``
-    of all points beyond ``REGION_FAR_DISTANCE`` (x the diagonal)."""
+    of all points beyond ``REGION_FAR_DISTANCE`` (x the diagonal); or where a seam folds
+    (``FOLDED_SEAM``: thin faces whose corners merged)."""
     from pde2cad.reconstruct import reconstruct
 
     layout = region_layout(surface, guide, patches=patches, patch_size=patch_size,
@@ -671,6 +684,10 @@ def _region_attempt(
     if worst > REGION_MEAN + noise or np.mean(np.concatenate(dist) > REGION_FAR_DISTANCE) > REGION_FAR:
         say(f"crease regions miss the points (a patch's mean distance {worst:.1e} x the "
             "diagonal); laying out patches instead")
+        return rec, layout, False
+    fold = _fold_angle(rec)
+    if fold > FOLDED_SEAM:
+        say(f"crease regions fold (seam angle {fold:.0f} deg); laying out patches instead")
         return rec, layout, False
     return rec, layout, True
 

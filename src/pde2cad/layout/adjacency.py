@@ -132,6 +132,12 @@ FRAME_ACCEPT = 0.2
 #: A segment that fits no plane is unfolded (:func:`_unfold`) on its graph of up to
 #: UNFOLD_NEIGHBOURS nearest own points within the radius.
 UNFOLD_NEIGHBOURS = 12
+#: ... when that graph reaches at least this share of it (crumbs apart from it are allowed).
+UNFOLD_REACHED = 0.9
+#: An unfolded strip's border run is bent when its extent along the main axis is under
+#: this share of its length (an arc of ~230 degrees: 2 r over its length; the axis folds
+#: one past 180, but half tubes of exactly 180 must keep it).
+BENT_RUN = 0.5
 FRAME_DIRECTIONS = 600
 #: Distances along the surface: shortest paths in the graph of each point's
 #: GEODESIC_NEIGHBOURS nearest points within the radius, from GEODESIC_CHUNK sources at a time.
@@ -840,6 +846,36 @@ def _hemisphere(n: int) -> NDArray[np.float64]:
     return np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
 
 
+def sample_normals(
+    pts: NDArray[np.float64], members: NDArray[np.int64], tree: cKDTree
+) -> NDArray[np.float64]:
+    """(n, 3) unoriented normals at up to ``FRAME_SAMPLES`` of a segment's points, spread
+    over it: PCA of their ``FRAME_NEIGHBOURS`` nearest cloud points."""
+    n_sample = min(FRAME_SAMPLES, len(members))
+    sample = members[np.linspace(0, len(members) - 1, n_sample).astype(np.int64)]
+    _, idx = tree.query(pts[sample], k=min(FRAME_NEIGHBOURS, len(pts)))
+    hood = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", hood, hood))
+    return vectors[:, :, 0]  # smallest-variance direction of each neighbourhood
+
+
+def _best_plane(normals: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """The plane normal (of ``FRAME_DIRECTIONS``) that maximises the ``FRAME_QUANTILE``
+    quantile of ``|normal . plane normal|`` over ``normals``, and that quantile: the cosine
+    of how close to edge-on the segment comes over its best plane."""
+    dirs = _hemisphere(FRAME_DIRECTIONS)
+    score = np.quantile(np.abs(normals @ dirs.T), FRAME_QUANTILE, axis=0)
+    best = int(score.argmax())
+    return dirs[best], float(score[best])
+
+
+def plane_score(pts: NDArray[np.float64], members: NDArray[np.int64], tree: cKDTree) -> float:
+    """:func:`_best_plane`'s quantile for a segment: near 1 on a flat one, ~0.3 on a
+    band of a cylinder turning 150 degrees, 0.05-0.08 on one turning 180 degrees or more,
+    which no plane sees as a height field."""
+    return _best_plane(sample_normals(pts, members, tree))[1]
+
+
 def _frame(
     pts: NDArray[np.float64], members: NDArray[np.int64], tree: cKDTree | None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:
@@ -850,22 +886,15 @@ def _frame(
     origin, axes = pca_frame(pts[members])
     if tree is None:
         return origin, axes, False
-    n_sample = min(FRAME_SAMPLES, len(members))
-    sample = members[np.linspace(0, len(members) - 1, n_sample).astype(np.int64)]
-    _, idx = tree.query(pts[sample], k=min(FRAME_NEIGHBOURS, len(pts)))
-    hood = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
-    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", hood, hood))
-    normals = vectors[:, :, 0]  # smallest-variance direction of each neighbourhood
+    normals = sample_normals(pts, members, tree)
     if np.quantile(np.abs(normals @ axes[2]), FRAME_QUANTILE) >= FOLD_COS:
         return origin, axes, False
-    dirs = _hemisphere(FRAME_DIRECTIONS)
-    score = np.quantile(np.abs(normals @ dirs.T), FRAME_QUANTILE, axis=0)
-    best = int(score.argmax())
-    if score[best] < FRAME_ACCEPT:
+    best, score = _best_plane(normals)
+    if score < FRAME_ACCEPT:
         # No plane keeps it a height field (the teapot's rim: its cross-section turns by
         # ~175 degrees); an arbitrary tilted one would fold it worse than the PCA plane.
         return origin, axes, True
-    normal = dirs[best]
+    normal = best
     # In-plane axes: PCA of the points projected on the plane.
     flat = pts[members] - origin
     flat -= np.outer(flat @ normal, normal)
@@ -886,10 +915,11 @@ def _unfold(
     is_border: NDArray[np.bool_],
 ) -> NDArray[np.float64] | None:
     """2D coordinates of a segment that fits no plane (a strip folded across its width, like
-    the teapot's rim): the coordinate ``along`` its main axis, and the geodesic distance
-    (shortest path in its own neighbour graph) from one run of its border with the segment
-    it shares the most border points with. None when it has no border or the graph falls
-    apart."""
+    the teapot's rim, or a band of a wall bending round in its own plane): the geodesic
+    distance (shortest path in its own neighbour graph) from one run of its border with the
+    segment it shares the most border points with, and the geodesic distance from one end of
+    that run (the coordinate ``along`` its main axis where that graph falls apart). None when
+    it has no border or the graph falls apart."""
     own = pts[members]
     dist, idx = cKDTree(own).query(own, k=UNFOLD_NEIGHBOURS + 1, distance_upper_bound=radius)
     ok = np.isfinite(dist[:, 1:])
@@ -913,9 +943,25 @@ def _unfold(
     comp = _components(len(seeds), link[:, 0].astype(np.int64), link[:, 1].astype(np.int64))
     seeds = seeds[comp == np.bincount(comp).argmax()]
     geo = dijkstra(graph, directed=False, indices=seeds, min_only=True)
-    if not np.isfinite(geo).all():
+    # Along the strip: the main axis, unless the run bends round too far for it (its
+    # extent along the axis under BENT_RUN x its length: a band of a C-shaped wall turning
+    # 300 degrees, which the axis folds); then the geodesic distance from one end of the
+    # run (it skews the run's ends, so the teapot's rim quarters keep the axis).
+    from_seed = dijkstra(graph, directed=False, indices=int(seeds[0]))
+    end = int(seeds[np.argmax(np.where(np.isfinite(from_seed[seeds]), from_seed[seeds], -1.0))])
+    run = dijkstra(graph, directed=False, indices=end)
+    length = float(np.max(np.where(np.isfinite(run[seeds]), run[seeds], 0.0)))
+    if float(np.ptp(own[seeds] @ along)) >= BENT_RUN * length:
+        run = own @ along
+    reached = np.isfinite(geo) & np.isfinite(run)
+    if reached.mean() < UNFOLD_REACHED:
         return None
-    return np.column_stack([own @ along, geo])
+    # Crumbs apart from the strip (a few points a cut left beyond a neighbour) sit where
+    # their nearest strip point does: the loop is the strip's.
+    _, near = cKDTree(own[reached]).query(own[~reached])
+    uv = np.column_stack([run, geo])
+    uv[~reached] = uv[reached][near]
+    return uv
 
 
 def _loop_candidates(

@@ -32,6 +32,11 @@ between :func:`~pde2cad.layout.adjacency.build_layout` and
    d. *Otherwise* chords between corners, chosen recursively so that the pieces' corner
       angles deviate least from 90 (quads) or 60 (triangles) degrees; straight cuts in the
       PCA plane.
+   e. *No segment left with more than 4 corners*: the halves of a tube (two sides on one
+      neighbour) are cut apart, else every quad whose surface turns ~170 degrees or more
+      (``WIDE_COS``: a C-shaped wall's face) is halved across its length; their neighbours'
+      new T-nodes are cut in the next rounds. A cut the merges undo lets the segments
+      that waited for it go first in the next round.
 
 After every step that cuts (rings, sectors, each round, the parts a cut leaves apart), a
 piece with fewer than ``MIN_PIECE_POINTS`` points merges into the neighbour it shares the
@@ -66,7 +71,13 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
-from pde2cad.layout.adjacency import Layout, build_layout, merge_small, separate_pieces
+from pde2cad.layout.adjacency import (
+    Layout,
+    build_layout,
+    merge_small,
+    plane_score,
+    separate_pieces,
+)
 from pde2cad.layout.edges import filter_corners
 from pde2cad.layout.rings import boundary_loops, split_rings
 from pde2cad.surfaces.region import pca_frame
@@ -112,6 +123,11 @@ MAX_ROUNDS = 12
 NARROW_RING = 6.0
 #: A piece holds the input segments that make up this share of its points.
 SOURCE_SHARE = 0.1
+#: A quad is halved when no plane sees it within this cosine (FRAME_QUANTILE of its
+#: normals): its surface turns by ~170 degrees or more. Measured: bands of a cylinder
+#: turning 150 / 180 / 300 deg 0.29 / 0.05 / 0.07; the cube-map faces of a noisy
+#: 1 x 0.6 x 0.35 ellipsoid, which fit as they are, 0.18-0.22.
+WIDE_COS = 0.12
 #: Ideal corner angle (degrees) of a piece with 3 and with 4 corners.
 IDEAL_ANGLE = {3: 60.0, 4: 90.0}
 
@@ -1041,12 +1057,18 @@ def split_segments(
     if out is not merged:
         layout = _add_sharp_turns(points, out, relayout(out), tree)
     source = {p: first for first, pieces in report.pieces.items() for p in pieces}
+    stuck: set[int] = set()  # segments whose cuts the merges undid
     # A strip cut moves its T-node on through every piece of the strip, one per round: a
-    # tube's faces cut into ~90 pieces (OCCT's sh1.stl) took 20 rounds.
-    for _ in range(max(MAX_ROUNDS, len(np.unique(out)))):
+    # tube's faces cut into ~90 pieces (OCCT's sh1.stl) took 20 rounds; halving a wide
+    # quad sends T-nodes along the strips of its neighbours, so the bound grows with the
+    # pieces.
+    rounds = 0
+    while rounds < max(MAX_ROUNDS, len(np.unique(out))):
+        rounds += 1
         layout = _drop_kinks(points, out, layout, tree)
         corners, seg_corners = filter_corners(layout, tree, out)
-        todo = _apart(layout, [(label, ids) for label, ids in sorted(seg_corners.items()) if len(ids) > 4])
+        todo = _apart(layout, [(label, ids) for label, ids in sorted(seg_corners.items())
+                               if len(ids) > 4 and label not in stuck])
         thin = _merge_thin(out, layout, seg_corners, source)
         if thin is not None:
             out = thin
@@ -1057,15 +1079,18 @@ def split_segments(
         cut: dict[int, set[int]] = {}  # the other piece of a cut in two (avoided)
         kin: dict[int, set[int]] = {}  # the other pieces of a cut into more (preferred)
         if not todo:
-            halved = _halve_digon(points, out, layout, tree, corners, seg_corners)
-            if halved is None:
+            digon = _halve_digon(points, out, layout, tree, corners, seg_corners)
+            halves = [digon] if digon is not None else _halve_wide(
+                points, out, layout, tree, corners, seg_corners)
+            if not halves:
                 break
-            label, beyond = halved
-            first = source.get(label, label)
-            out[out == label] = np.where(beyond, next_label, label)
-            report.pieces.setdefault(first, [first]).append(next_label)
-            report.corners.setdefault(first, len(seg_corners[label]))
-            source[label] = source[next_label] = first
+            for label, beyond in halves:
+                first = source.get(label, label)
+                out[out == label] = np.where(beyond, next_label, label)
+                report.pieces.setdefault(first, [first]).append(next_label)
+                report.corners.setdefault(first, len(seg_corners[label]))
+                source[label] = source[next_label] = first
+                next_label += 1
             layout = _add_sharp_turns(points, out, relayout(out), tree)
             continue
         for label, ids in todo:
@@ -1095,9 +1120,13 @@ def split_segments(
         out, next_label = _separate(points, out, report, next_label, source)
         out = _settle(points, out, report, cut, kin)
         if np.array_equal(out, start):
-            break  # every cut undone by its pieces' merges: _check_pieces names the segment
+            # Every cut undone by its pieces' merges: the segments that waited for these
+            # (their neighbours) get their turn; _check_pieces names any left.
+            stuck.update(label for label, _ in todo)
+            continue
+        stuck.clear()  # new neighbours may let an undone cut stand
         layout = _add_sharp_turns(points, out, relayout(out), tree)
-    else:
+    if rounds >= max(MAX_ROUNDS, len(np.unique(out))):
         layout = _drop_kinks(points, out, layout, tree)
     _check_pieces(layout, tree, out, source, report)
     return out, layout, report
@@ -1176,6 +1205,41 @@ def _halve_digon(
             if min(int(which.sum()), int(members.sum() - which.sum())) >= MIN_PIECE_POINTS:
                 return label, which[members]
     return None
+
+
+def _halve_wide(
+    points: NDArray[np.float64], labels: NDArray[np.int64], layout: Layout, tree: cKDTree,
+    corners: NDArray[np.float64], seg_corners: dict[int, list[int]],
+) -> list[tuple[int, NDArray[np.bool_]]]:
+    """Every quad whose surface turns too far for one patch (no plane sees it within
+    ``WIDE_COS``: a C-shaped wall's 300-degree face, a half cylinder), and
+    which of its points lie beyond its middle between the two opposite sides whose cut
+    leaves the flatter halves (:func:`_side_distances`). The neighbours get T-nodes that
+    the next rounds carry along their strips."""
+    out = []
+    for label, ids in sorted(seg_corners.items()):
+        members = np.flatnonzero(labels == label)
+        if len(ids) != 4 or len(members) < 4 * MIN_PIECE_POINTS:
+            continue
+        whole = plane_score(points, members, tree)
+        if whole >= WIDE_COS:
+            continue
+        order = _ordered_corners(layout, points, label, ids, corners)
+        loop = layout.loops[label]
+        _, at = cKDTree(points[loop]).query(corners[order])
+        d = _side_distances(points[members], points[loop], at, np.arange(4))
+        best: tuple[float, NDArray[np.bool_]] | None = None
+        for k in (0, 1):
+            beyond = d[k] / np.maximum(d[k] + d[k + 2], 1e-300) > 0.5
+            if min(int(beyond.sum()), int((~beyond).sum())) < MIN_PIECE_POINTS:
+                continue
+            score = min(plane_score(points, members[beyond], tree),
+                        plane_score(points, members[~beyond], tree))
+            if best is None or score > best[0]:
+                best = (score, beyond)
+        if best is not None and best[0] > whole:  # halves that turn no less: left as is
+            out.append((label, best[1]))
+    return out
 
 
 def _check_pieces(
