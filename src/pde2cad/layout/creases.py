@@ -117,23 +117,39 @@ CLOUD_NOISE_DEVIATIONS = 3.0
 
 
 def _variation(points: NDArray[np.float64], idx: NDArray[np.int64]
-               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Surface variation ``l0 / (l0 + l1 + l2)`` of each point's neighbours ``idx`` and
-    their spread ``l0 + l1 + l2`` (eigenvalues of their covariance), in chunks (bounded
-    memory on large clouds)."""
-    out, spread = np.empty(len(points)), np.empty(len(points))
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Surface variation ``l0 / (l0 + l1 + l2)`` of each point's neighbours ``idx``, their
+    spread ``l0 + l1 + l2`` (eigenvalues of their covariance), and their quadric variation:
+    the mean square height off the quadric through them (in their PCA frame) over the
+    spread, which a curved smooth surface keeps near 0 where its sag raises ``l0``; in
+    chunks (bounded memory on large clouds)."""
+    out, spread, quad = np.empty(len(points)), np.empty(len(points)), np.empty(len(points))
     step = max(1, CHUNK_VALUES // idx.shape[1])
     for start in range(0, len(points), step):
-        near = points[idx[start : start + step]]
+        part = slice(start, start + step)
+        near = points[idx[part]]
         hood = near - near.mean(axis=1, keepdims=True)
-        values = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", hood, hood)) / idx.shape[1]
-        spread[start : start + step] = values.sum(axis=1)
-        out[start : start + step] = values[:, 0] / np.maximum(spread[start : start + step], 1e-300)
-    return out, spread
+        values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", hood, hood))
+        values /= idx.shape[1]
+        spread[part] = values.sum(axis=1)
+        out[part] = values[:, 0] / np.maximum(spread[part], 1e-300)
+        local = np.einsum("nki,nij->nkj", hood, vectors)  # columns: normal, minor, major
+        z = local[..., 0]
+        scale = np.sqrt(values[:, 1:].sum(axis=1))[:, None] + 1e-300
+        x, y = local[..., 2] / scale, local[..., 1] / scale
+        design = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+        gram = np.einsum("nki,nkj->nij", design, design) + 1e-10 * np.eye(6)
+        coef = np.linalg.solve(gram, np.einsum("nki,nk->ni", design, z)[..., None])[..., 0]
+        residual = z - np.einsum("nki,ni->nk", design, coef)
+        quad[part] = (residual**2).mean(axis=1) / np.maximum(spread[part], 1e-300)
+    return out, spread, quad
 
 
 #: Neighbour coordinates per chunk of :func:`_variation`.
-CHUNK_VALUES = 2_000_000
+CHUNK_VALUES = 1_000_000
+#: A quadric through a crease's neighbourhood leaves this share of the variation a plane
+#: leaves (:func:`crease_variation`; 0.0719 at 30, 60 and 90 deg, sampled on a disk).
+QUADRIC_SHARE = 0.072
 
 
 def crease_variation(angle: float) -> float:
@@ -226,7 +242,9 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
        a noisy cloud tells only its sharper creases. None when no count tells even
        ``CLOUD_MAX_ANGLE`` or the median point is still rough (a curved cloud).
     2. Points near a crease: that excess variation above ``CLOUD_SHARE`` x
-       :func:`crease_variation` of the angle told.
+       :func:`crease_variation` of the angle told, and, where the noise's wobble lets it
+       tell, their quadric variation above ``QUADRIC_SHARE`` x that (a tight curve sags
+       like a crease but fits a quadric).
     3. The other points, joined to their neighbours, fall into connected regions; regions
        of fewer than ``min_points`` points (speckle along a crease) count as crease points.
     4. Crease points take the region whose plane through its nearest points lies nearest
@@ -246,7 +264,7 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
     k = min(CLOUD_NEIGHBOURS[0], len(pts))
     _, idx = tree.query(pts, k=k, workers=-1)
     sigma = surface_noise(pts, tree)
-    variation, spread = _variation(pts, idx)
+    variation, spread, quad = _variation(pts, idx)
     # The noise's share sigma^2 / spread falls as 1/k and its deviation as 1/sqrt(k), so its
     # wobble as k^-1.5, while a crease's variation keeps: more neighbours for noisier clouds.
     wobble = CLOUD_NOISE_DEVIATIONS * float(np.median(sigma**2 / spread)) * np.sqrt(2.0 / k)
@@ -259,12 +277,17 @@ def cloud_regions(points: NDArray[np.float64], angle: float, min_points: int
     if best != k:
         k = min(best, len(pts))
         _, idx = tree.query(pts, k=k, workers=-1)
-        variation, spread = _variation(pts, idx)
+        variation, spread, quad = _variation(pts, idx)
     threshold = CLOUD_SHARE * crease_variation(told_angle)
     excess = variation - sigma**2 / np.maximum(spread, 1e-300)
     if np.median(excess) > CLOUD_NOISE_SHARE * threshold:
         return None
     flat = excess <= threshold
+    if wobble * (CLOUD_NEIGHBOURS[0] / k) ** 1.5 <= QUADRIC_SHARE * threshold:
+        # A tight curve (a bolt hole's wall, 8 spacings round) sags like a crease; the
+        # quadric takes the sag but not a crease's kink, where the noise lets it tell.
+        noise = sigma**2 * (k - 6) / k / np.maximum(spread, 1e-300)
+        flat |= quad - noise <= QUADRIC_SHARE * threshold
     # Joined to the nearest few only: the variation's neighbourhood reaches ~3 spacings, as
     # far as a crease's band is wide, so its edges would bridge the band.
     link = min(CLOUD_LINKS, k)
