@@ -242,7 +242,11 @@ def _start_and_wait_for_temps(slow_image, folder) -> subprocess.Popen:  # noqa: 
     proc = subprocess.Popen([sys.executable, "-m", "pde2cad.cli", "vectorize", str(slow_image),
                              "-o", str(folder / "s.svg"), "-o", str(folder / "s.dxf"),
                              "--report", str(folder / "s.json")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            # Ctrl-C as in a terminal: a background job (nohup, `cmd &` in a
+                            # script) starts its children with SIGINT ignored, and Python then
+                            # installs no KeyboardInterrupt handler (the run ended with 0).
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while len(litter(folder)) < 3 and time.monotonic() < deadline:
         time.sleep(0.05)
