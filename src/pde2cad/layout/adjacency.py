@@ -75,6 +75,7 @@ from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
 from pde2cad.surfaces.region import boundary_loop, pca_frame
+from pde2cad.surfaces.sheets import same_sheet
 
 #: The neighbour radius is RADIUS_FACTOR x the median distance to the k-th neighbour; farther
 #: neighbours are ignored (so the graph does not bridge gaps). Scaling by the k-th rather
@@ -850,11 +851,15 @@ def sample_normals(
     pts: NDArray[np.float64], members: NDArray[np.int64], tree: cKDTree
 ) -> NDArray[np.float64]:
     """(n, 3) unoriented normals at up to ``FRAME_SAMPLES`` of a segment's points, spread
-    over it: PCA of their ``FRAME_NEIGHBOURS`` nearest cloud points."""
+    over it: PCA of those of their ``FRAME_NEIGHBOURS`` nearest cloud points on their own
+    sheet (:func:`~pde2cad.surfaces.sheets.same_sheet`)."""
     n_sample = min(FRAME_SAMPLES, len(members))
     sample = members[np.linspace(0, len(members) - 1, n_sample).astype(np.int64)]
     _, idx = tree.query(pts[sample], k=min(FRAME_NEIGHBOURS, len(pts)))
-    hood = pts[idx] - pts[idx].mean(axis=1, keepdims=True)
+    # Only the sample's own sheet: on a thin lip the far side's points tilt the normal.
+    w = same_sheet(pts, idx).astype(float)[:, :, None]
+    mean = (w * pts[idx]).sum(axis=1, keepdims=True) / w.sum(axis=1, keepdims=True)
+    hood = w * (pts[idx] - mean)
     _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", hood, hood))
     return vectors[:, :, 0]  # smallest-variance direction of each neighbourhood
 

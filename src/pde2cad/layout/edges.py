@@ -49,6 +49,7 @@ from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import CLUSTER_FACTOR, Layout
 from pde2cad.surfaces.boundary import PiecewiseBezier
 from pde2cad.surfaces.rim import locate_rim, sample_spacing
+from pde2cad.surfaces.sheets import SHEET_STRETCH, one_sheet, same_sheet
 
 Key = tuple[int, int]
 
@@ -83,6 +84,10 @@ END_TRIM = 1.0
 #: END_SHARE x chord) of the corner.
 END_REACH = 6.0
 END_SHARE = 0.1
+#: Most turn of an end's quadratic over its reach (degrees), and the shortest reach (radii)
+#: it is shortened to when it turns more.
+END_TURN = 60.0
+END_LEAST = 2.0
 #: Corners move at most this many neighbour radii in the refinement.
 MAX_CORNER_MOVE = 3.0
 #: Reweighting rounds of the robust meeting point of the end tangent lines, and its scale
@@ -130,6 +135,9 @@ PAIR_REACH = 4.5
 #: intersection, not onto one quadric fitted across both (which rounds the crease off).
 #: Measured medians: smooth seams <= 15 deg at 0.4 % noise, the pot's 56-deg crease >= 50.
 CREASE_ANGLE = 25.0
+#: ... and, between two corners that are both smooth (``_smooth_corners``), more than this
+#: (a crease lost in the noise at both corners still reads 50-90 deg along its length).
+CREASE_SURE = 50.0
 #: The one-sided surfaces use the segment's points within this many radii of the queries.
 SHEET_REACH = 4.0
 #: Cloud neighbours of the one-sided quadrics that test an edge for a crease.
@@ -532,22 +540,26 @@ def mls_project(
     queries: NDArray[np.float64], cloud: NDArray[np.float64], tree: cKDTree, k: int = MLS_NEIGHBOURS
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Project points onto the cloud's surface: a quadric height field over each query's ``k``
-    nearest cloud points (in their PCA frame), evaluated below the query. Batched, no loops.
+    nearest cloud points on its own sheet (:func:`~pde2cad.surfaces.sheets.same_sheet`; in
+    their PCA frame), evaluated below the query. Batched, no loops.
 
     Returns the projected points (Q, 3) and unit normals (Q, 3) (orientation arbitrary).
     """
     k = min(k, len(cloud))
     _, idx = tree.query(queries, k=k)
     hood = cloud[idx]  # (Q, k, 3)
-    origin = hood.mean(axis=1)
-    centred = hood - origin[:, None]
+    # The query's own sheet only (a thin lip's far side is in the ball, not on the surface).
+    w = same_sheet(cloud, idx).astype(float)
+    count = w.sum(axis=1)
+    origin = np.einsum("qk,qki->qi", w, hood) / count[:, None]
+    centred = (hood - origin[:, None]) * w[..., None]
     _, vecs = np.linalg.eigh(np.einsum("qki,qkj->qij", centred, centred))
     frame = vecs[:, :, ::-1].transpose(0, 2, 1)  # rows: major, minor, normal
     local = np.einsum("qki,qji->qkj", centred, frame)
     x, y, z = local[..., 0], local[..., 1], local[..., 2]
-    design = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)  # (Q, k, 6)
+    design = np.stack([w, x, y, x * x, x * y, y * y], axis=-1)  # (Q, k, 6), 0 off the sheet
     # Scale columns to the neighbourhood size so the 6 x 6 normal equations stay well posed.
-    h = np.sqrt((x * x + y * y).mean(axis=1))[:, None]
+    h = np.sqrt((x * x + y * y).sum(axis=1) / count)[:, None]
     powers = np.array([0, 1, 1, 2, 2, 2])
     design = design / h[..., None] ** powers
     gram = np.einsum("qki,qkj->qij", design, design) + 1e-10 * np.eye(6)
@@ -577,15 +589,24 @@ def _end_line(
     over the same data would, by half the turn)."""
     dist = np.linalg.norm(data - corner, axis=1)
     reach = max(END_REACH * radius, END_SHARE * length)
-    near = data[dist <= reach]
-    if len(near) < 6:
-        near = data[np.argsort(dist)[: min(len(data), 12)]]
-    centre = near.mean(axis=0)
-    axis = np.linalg.svd(near - centre, full_matrices=False)[2][0]
-    s = (near - centre) @ axis
-    s0 = float((corner - centre) @ axis)
-    design = np.column_stack([np.ones_like(s), s, s * s])
-    coef = np.linalg.lstsq(design, near, rcond=None)[0]
+    while True:
+        near = data[dist <= reach]
+        if len(near) < 6:
+            near = data[np.argsort(dist)[: min(len(data), 12)]]
+        centre = near.mean(axis=0)
+        axis = np.linalg.svd(near - centre, full_matrices=False)[2][0]
+        s = (near - centre) @ axis
+        s0 = float((corner - centre) @ axis)
+        design = np.column_stack([np.ones_like(s), s, s * s])
+        coef = np.linalg.lstsq(design, near, rcond=None)[0]
+        # A quadratic over the axis follows an end that turns little within the reach;
+        # one turning round a lip (the teapot rim's cross-section, 175 deg over 7 radii)
+        # folds over the axis: a shorter reach then.
+        tips = coef[1][None] + 2 * coef[2][None] * np.array([s.min(), s.max()])[:, None]
+        tips /= np.maximum(np.linalg.norm(tips, axis=1, keepdims=True), 1e-300)
+        if tips[0] @ tips[1] >= np.cos(np.radians(END_TURN)) or reach <= END_LEAST * radius:
+            break
+        reach = max(0.5 * reach, END_LEAST * radius)
     point = coef[0] + coef[1] * s0 + coef[2] * s0 * s0
     direction = coef[1] + 2 * coef[2] * s0
     direction = direction / np.linalg.norm(direction)
@@ -631,6 +652,36 @@ def _line_point(
             r = np.linalg.norm(np.einsum("lij,lj->li", proj, x[None] - p), axis=1)
             w = base / (1.0 + (r / scale) ** 2)
     return x
+
+
+def _onto_sheet(
+    pts: NDArray[np.float64], tree: cKDTree, guess: NDArray[np.float64],
+    moved: NDArray[np.float64], radius: float, spacing: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A refined corner and its normal: ``moved`` (the end lines' meeting point) projected
+    onto the quadric of the sheet the layout's corner ``guess`` lies on.
+
+    1. The points within the quadric's reach of ``moved`` that lie on ``guess``'s own sheet
+       (:func:`~pde2cad.surfaces.sheets.one_sheet`: a thin lip's far side is left out).
+    2. ``moved`` onto their quadric; where that lands off their data (the end lines of a
+       short edge round a lip met over its far side), ``guess`` onto the quadric of its
+       own sheet around it instead.
+    3. No quadric (too few points): ``moved`` and the points' plane normal.
+    """
+    reach = max(QUADRIC_RADIUS * radius, 4 * spacing)
+    near = pts[tree.query_ball_point(moved, reach)]
+    if len(near) >= 12:
+        near = near[one_sheet(near, moved[None], radius, SHEET_STRETCH * reach, 12)]
+    fit = _quadric(near, moved)
+    if fit is not None and np.min(np.linalg.norm(near - fit[0], axis=1)) > radius:
+        near = pts[tree.query_ball_point(guess, reach)]
+        if len(near) >= 12:
+            near = near[one_sheet(near, guess[None], radius, reach, 12)]
+        fit = _quadric(near, guess)
+    if fit is not None and np.linalg.norm(fit[0] - guess) <= MAX_CORNER_MOVE * radius:
+        return fit
+    normal = np.linalg.svd(near - near.mean(axis=0))[2][-1] if len(near) >= 3 else np.array([0.0, 0, 1])
+    return moved, normal
 
 
 # --------------------------------------------------------------------------- main
@@ -761,24 +812,24 @@ def build_edges(
         )
         if np.linalg.norm(moved - guess) > MAX_CORNER_MOVE * radius:
             moved = guess
-        near = pts[tree.query_ball_point(moved, max(QUADRIC_RADIUS * radius, 4 * spacing))]
-        fit = _quadric(near, moved)
-        if fit is not None and np.linalg.norm(fit[0] - guess) <= MAX_CORNER_MOVE * radius:
-            corners[c], normals[c] = fit
-        else:
-            corners[c] = moved
-            normals[c] = np.linalg.svd(near - near.mean(axis=0))[2][-1] if len(near) >= 3 else [0, 0, 1]
+        corners[c], normals[c] = _onto_sheet(pts, tree, guess, moved, radius, spacing)
 
     away = {(key[end], key): ends[(key, end)][1] for key, end in ends}
-    smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users, max(QUADRIC_RADIUS * radius, 4 * spacing))
+    smooth = _smooth_corners(pts, lab, tree, corners, at_corner, users,
+                             max(QUADRIC_RADIUS * radius, 4 * spacing), radius)
     # Creases: shared edges whose two segments' own surfaces meet at an angle along them (a
     # median over the edge's data survives noise that hides the crease at one corner).
     sheets = _Sheets(pts, lab, tree, SHEET_REACH * radius, _sheet_neighbours(pts, tree, spacing))
     creases = set()
+    at_ends = dict(smooth)
     for key, who in users.items():
         if len(who) == 2:
             step = max(1, len(data[key]) // CREASE_SAMPLES)
-            if sheets.angle(data[key][::step], sorted(who)) > CREASE_ANGLE:
+            angle = sheets.angle(data[key][::step], sorted(who))
+            # Smooth at both ends and a mild angle: one-sided quadrics misread a tight bend
+            # (the teapot rim's crest, ~2 radii round: 26 deg), not a crease.
+            mild = at_ends.get(key[0], False) and at_ends.get(key[1], False) and angle <= CREASE_SURE
+            if angle > CREASE_ANGLE and not mild:
                 creases.add(key)
                 smooth[key[0]] = smooth[key[1]] = False
     pairs, regular = _pairs(loops, users, len(corners), away, smooth, creases)
@@ -1079,18 +1130,22 @@ def _smooth_corners(
     at_corner: dict[int, list[tuple[Key, int]]],
     users: dict[Key, list[int]],
     reach: float,
+    link: float,
 ) -> dict[int, bool]:
     """Whether the surface is smooth at each corner: the incident segments' own quadrics
     (points within ``reach``) agree on the normal at the corner to ``SMOOTH_ANGLE``, or one
     quadric over all of them fits about as well as one per segment (a crease makes the common
     one miss by a multiple of its angle x reach; noise affects both alike, so a crease lost in
-    the noise counts as smooth)."""
+    the noise counts as smooth). Only the points on the corner's own sheet count (links of at
+    most ``link``: a thin lip's far side is no crease)."""
     cos_min = np.cos(np.radians(SMOOTH_ANGLE))
     out: dict[int, bool] = {}
     for c, incident in at_corner.items():
         segs = sorted({u for key, _ in incident for u in users[key]})
         idx = np.asarray(tree.query_ball_point(corners[c], reach), dtype=np.int64)
         idx = idx[np.isin(labels[idx], segs)]
+        if len(idx) >= 12:
+            idx = idx[one_sheet(points[idx], corners[c][None], link, reach, 12)]
         near = points[idx]
         groups = [near[labels[idx] == label] for label in segs]
         if len(segs) < 2 or min(len(g) for g in groups) < 6:

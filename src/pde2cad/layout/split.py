@@ -1080,7 +1080,9 @@ def split_segments(
         kin: dict[int, set[int]] = {}  # the other pieces of a cut into more (preferred)
         if not todo:
             digon = _halve_digon(points, out, layout, tree, corners, seg_corners)
-            halves = [digon] if digon is not None else _halve_wide(
+            # Wide quads are halved in crease-bounded regions only: a user's labelled quad
+            # (the teapot's rim, a lip turning 175 deg across) is fitted as given.
+            halves = [digon] if digon is not None else [] if not fenced else _halve_wide(
                 points, out, layout, tree, corners, seg_corners)
             if not halves:
                 break

@@ -48,6 +48,7 @@ from scipy.special import log_ndtr
 
 from pde2cad.curves.piecewise import denoise
 from pde2cad.surfaces.boundary import PiecewiseBezier
+from pde2cad.surfaces.sheets import SHEET_LINK, SHEET_STRETCH, one_sheet
 
 #: Window length along the rim, in sample spacings: ~RIM_WINDOW x RIM_DEPTH points per window.
 RIM_WINDOW = 12.0
@@ -57,6 +58,9 @@ RIM_STEP = 6.0
 RIM_DEPTH = 4.0
 #: ... and at least this many noise sigmas (so the noise blur of the rim lies inside it).
 NOISE_DEPTH = 4.0
+#: Farthest a rim point may lie from the provisional side, in sample spacings (or
+#: NOISE_DEPTH noise sigmas); a window that moves it farther is dropped.
+RIM_MOST = 3.0
 #: Neighbour rank whose distance gives the density (rho = k / (pi r_k^2)).
 DENSITY_RANK = 10
 #: A window needs this many points for its quadric (6 unknowns) and offset estimate.
@@ -218,6 +222,9 @@ def _stations(
     near = np.unique(np.concatenate(balls).astype(np.int64))
     if not len(near):
         return None
+    # The side's own sheet only: a thin lip's far side lies within the tube.
+    near = near[one_sheet(points[near], ref, SHEET_LINK * spacing, SHEET_STRETCH * reach,
+                          len(near) // 4)]
     p = points[near]
     _, k = cKDTree(ref).query(p)
     a = arc[k] + np.einsum("ij,ij->i", p - ref[k], tangent[k])
@@ -255,6 +262,14 @@ def _stations(
     yy = e / half
     height = coef[:, 0] + coef[:, 2] * yy + coef[:, 5] * yy * yy
     rim = q + e[:, None] * outward + height[:, None] * normal
+    # The rim lies about half a spacing (noise: a few sigmas) beyond the loop; a station
+    # moved farther read a window that is no height field (a lip's crest within its depth).
+    # The noise is the windows' median: a window reading its own misfit as noise would
+    # excuse itself.
+    noise = float(np.median(sigma[ok]))
+    ok &= np.linalg.norm(rim - q, axis=1) <= max(RIM_MOST * spacing, NOISE_DEPTH * noise)
+    if not ok.any():
+        return None
     return RimEstimate(
         points=rim[ok], arc=np.asarray(station_arc[ok], dtype=np.float64), length=length, shift=e[ok], noise=sigma[ok],
         sampled=sampled[ok],
