@@ -57,6 +57,10 @@ AUTO_SAMPLE = 20_000
 AUTO_POINTS_PER_TERM = 4
 #: The smallest candidate whose held-out RMS error is within this factor of the best wins.
 AUTO_SLACK = 1.01
+#: Largest ratio of a candidate's deformation anywhere on the patch (a SWING_GRID grid) to
+#: its largest at the points (sound fits stay under 1.7, see reconstruct.C1_SWING_RATIO).
+AUTO_SWING = 4.0
+SWING_GRID = 21
 
 
 def _check_kind(kind: str) -> None:
@@ -792,15 +796,30 @@ def select_terms(
         return int(min(candidates))
     top = max(usable)
     r_train, p_train = r[train], p[train]
-    scores = []
+    scores, swings = [], []
     with _single_threaded_blas():
         data = _accumulate(r_train, p_train, top, top + 1 if flat_top else top, kind)
         for k in usable:
             fit = _solve(r_train, data, k, k, None, flat_top)
             miss = r[test] - fit.evaluate(p[test, 0], p[test, 1])
             scores.append(float(np.sqrt(np.einsum("ij,ij->", miss, miss) / len(test))))
-    best = min(scores)
-    return next(k for k, score in zip(usable, scores) if score <= AUTO_SLACK * best)
+            swings.append(_swing(fit, p_train))
+    # Candidates that swing out where no point holds them (a hole in the parameters: a
+    # lip's points that project unevenly onto a base off the surface) are not scored by
+    # held-out points, which lie where the others are; they go unless all swing.
+    calm = [i for i, ratio in enumerate(swings) if ratio <= AUTO_SWING] or [int(np.argmin(swings))]
+    best = min(scores[i] for i in calm)
+    return next(usable[i] for i in calm if scores[i] <= AUTO_SLACK * best)
+
+
+def _swing(fit: Deformation, params: NDArray[np.float64]) -> float:
+    """A deformation's largest size on a ``SWING_GRID`` grid over the parameter square, over
+    its largest at ``params``."""
+    g = np.linspace(0.0, 1.0, SWING_GRID)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    grid = np.linalg.norm(fit.evaluate(u, v), axis=1).max()
+    at = np.linalg.norm(fit.evaluate(params[:, 0], params[:, 1]), axis=1).max()
+    return float(grid / max(float(at), 1e-300))
 
 
 def choose_mn(
