@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from pde2cad.errors import InputError
 from pde2cad.layout.adjacency import build_layout, separate_pieces
@@ -91,3 +92,27 @@ def test_a_piece_too_small_joins_the_piece_next_to_it() -> None:
     assert out[x < 0.49][0] != out[x > 0.51][0]
     assert np.array_equal(_absorb_small(pts, np.zeros(4000, np.int64), 50), np.zeros(4000))
     assert _absorb_small(pts[:30], which[:30], 50).max() == 0  # every piece small: one piece
+
+
+def test_pieces_facing_each_other_across_a_gap_share_no_border() -> None:
+    """Two random sheets ending edge to edge, one 0.6 neighbour radii above the other (the
+    teapot's lid wall and its rim's lip on a 0.2 %-noise cloud, 0.1 apart at radius
+    0.053): points of both lie within a radius of each other and each surface ends there,
+    as at a crease, but even the closest pair stays a gap apart. They share no border and
+    each keeps its own 4 corners. Without the gap, flat or folded up by 90 degrees (a
+    crease), the same sheets share one."""
+    rng = np.random.default_rng(3)
+    n = 20_000
+    low = np.column_stack([rng.uniform(-1.0, 0.0, n), rng.uniform(0.0, 1.0, n), np.zeros(n)])
+    s = rng.uniform(0.0, 1.0, n)
+    high = np.column_stack([s, rng.uniform(0.0, 1.0, n), np.zeros(n)])
+    labels = np.repeat([0, 1], n)
+    radius = build_layout(np.vstack([low, high + [0.0, 0.0, 5.0]]), labels).radius
+    step = high + [0.0, 0.0, 0.6 * radius]
+    assert cKDTree(low).query(step)[0].min() < radius
+    apart = build_layout(np.vstack([low, step]), labels)
+    assert (0, 1) not in apart.adjacency
+    assert all(len(ids) == 4 for ids in apart.segment_corners.values())
+    up = np.column_stack([np.zeros(n), high[:, 1], s])
+    for other in (high, up):
+        assert (0, 1) in build_layout(np.vstack([low, other]), labels).adjacency
