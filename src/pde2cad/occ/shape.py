@@ -248,10 +248,17 @@ def _count(shape: TopoDS_Shape, kind: Any) -> int:
     return n
 
 
-def volume(shape: TopoDS_Shape) -> float:
-    """Return the volume enclosed by ``shape`` (negative for an inside-out solid)."""
+def volume(shape: TopoDS_Shape, eps: float | None = None) -> float:
+    """Return the volume enclosed by ``shape`` (negative for an inside-out solid), by
+    OpenCASCADE's default Gauss rule (as FreeCAD's ``Shape.Volume``), or integrated
+    adaptively to a relative error of ``eps`` (5-8x slower; the default rule is off by
+    ~1e-4 on B-spline faces: a box cut from a reconstructed can and the part minus their
+    common part differed by 1.7e-4 by the default rule, by 2e-10 at ``eps = 1e-9``)."""
     props = GProp_GProps()
-    BRepGProp.VolumeProperties_s(shape, props)
+    if eps is None:
+        BRepGProp.VolumeProperties_s(shape, props)
+    else:
+        BRepGProp.VolumeProperties_s(shape, props, eps)
     return float(props.Mass())
 
 
