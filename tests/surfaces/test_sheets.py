@@ -53,3 +53,16 @@ def test_one_sheet_and_the_projection_stay_on_the_queried_side() -> None:
     on, normal = mls_project(queries, pts, cKDTree(pts), 300)
     assert np.abs(on[:, 2]).max() < 1e-9
     assert np.abs(normal[:, 2]).min() > 1 - 1e-9
+
+
+def test_same_sheet_keeps_rows_of_repeated_points() -> None:
+    """Rows that repeat their own point (a k-NN query within a radius, padded with the point
+    itself where fewer neighbours lie within it; or duplicate scan points) have no spacing:
+    they are kept whole instead of blowing the search's coordinates up to ~1e300."""
+    pts = hairpin(5000)
+    tree = cKDTree(pts)
+    dist, idx = tree.query(pts[:2000], k=13, distance_upper_bound=0.012)
+    rows = np.where(idx < len(pts), idx, np.arange(2000)[:, None])
+    assert (np.isinf(dist).sum(axis=1) > 6).any()
+    mask = same_sheet(pts, rows)
+    assert mask[np.isinf(dist).sum(axis=1) > 6].all()

@@ -76,7 +76,8 @@ def same_sheet(points: NDArray[np.float64], idx: NDArray[np.int64]) -> NDArray[n
     centred = hood - hood.mean(axis=1, keepdims=True)
     normal = np.linalg.eigh(np.einsum("qki,qkj->qij", centred, centred))[1][:, :, 0]
     slab = np.abs(np.einsum("qki,qi->qk", centred, normal)).max(axis=1)
-    test = np.flatnonzero(slab >= 0.5 * unit)
+    # (Rows without SPACING_RANK distinct neighbours, e.g. padded with repeats, stay whole.)
+    test = np.flatnonzero((slab >= 0.5 * unit) & (spacing > 0.0))
     if test.size:
         out[test] = _on_paths(hood[test], straight[test], unit[test])
     return out
