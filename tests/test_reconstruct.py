@@ -319,6 +319,20 @@ def test_teapot_rim_lip_reconstructs_c1_on_its_own_sheet(tmp_path: Path) -> None
     assert np.abs(r[inner] - 1.4).max() <= 0.01 and np.abs(xyz[inner, 2] - 2.4).max() <= 0.02
 
 
+def test_repeated_points_are_read_once() -> None:
+    """Every point given 8 times (scans and meshes read as points repeat samples): the same
+    surfaces as the points given once. Before, no point had a nearest neighbour apart from
+    itself and the layout stopped with "all points coincide"."""
+    cloud = samples.cylinder(8000)
+    once = reconstruct(cloud.points, cloud.labels)
+    eight = reconstruct(np.repeat(cloud.points, 8, axis=0), np.repeat(cloud.labels, 8))
+    g = np.linspace(0.0, 1.0, 11)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    assert sorted(once.surfaces) == sorted(eight.surfaces)
+    for label, surface in once.surfaces.items():
+        assert np.array_equal(surface.evaluate(u, v), eight.surfaces[label].evaluate(u, v))
+
+
 def test_teapot_body_and_bottom_c1(tmp_path: Path) -> None:
     """Classic Bezier-patch model: the Utah teapot's body (eight 4-sided patches, four-way
     corners, open rims) and bottom (four 3-sided patches around a pole) are C1 everywhere,

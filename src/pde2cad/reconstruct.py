@@ -38,7 +38,7 @@ from pde2cad.bspline.convert import patch_to_bspline
 from pde2cad.bspline.data import BSplineSurface
 from pde2cad.errors import FitError, InputError
 from pde2cad.frame import Frame
-from pde2cad.io.clouds import as_labels
+from pde2cad.io.clouds import as_labels, first_of_repeats
 from pde2cad.layout import Layout, build_layout
 from pde2cad.layout.edges import EdgeNetwork, build_edges
 from pde2cad.layout.known import KnownCorners, with_known_corners
@@ -300,6 +300,15 @@ def _check_options(m: object, n: object, continuity: str, tolerance: float | Non
         raise InputError(f"continuity must be 'c0' or 'c1', got {continuity!r}")
 
 
+def _distinct(
+    world: NDArray[np.float64], lab: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The points without exact repeats, the first of each kept, in input order (every point
+    repeated left no nearest-neighbour spacing: "all points coincide")."""
+    keep = first_of_repeats(world)
+    return (world, lab) if keep is None else (world[keep], lab[keep])
+
+
 def _build_network(
     pts: NDArray[np.float64], lab: NDArray[np.int64], continuity: str,
     timings: dict[str, float], progress: Progress | None, corners: KnownCorners | None = None,
@@ -483,7 +492,7 @@ def fit_surfaces(
     -------
     SurfaceModel
     """
-    world, lab = check_cloud(points, labels)
+    world, lab = _distinct(*check_cloud(points, labels))
     _check_options(m, n, continuity, tolerance, cad_tolerance)
     frame = Frame.of(world)
     pts = frame.to_local(world)

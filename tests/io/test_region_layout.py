@@ -110,9 +110,9 @@ def test_a_mesh_without_creases_has_no_region_layout(tmp_path: Path) -> None:
     assert region_layout(surface, (surface.vertices, surface.triangles)) is None
 
 
-def _box_cloud_report(tmp_path: Path, noise: float = 0.0) -> tuple[dict, list[str], object]:
+def _box_cloud_report(tmp_path: Path, noise: float = 0.0, repeat: int = 1) -> tuple[dict, list[str], object]:
     """A 2 x 1.4 x 1 box's 30k samples (no faces; ``noise``: Gaussian, x the diagonal per
-    axis) through reconstruct_auto, C1."""
+    axis; each written ``repeat`` times) through reconstruct_auto, C1."""
     from pde2cad.io.meshes import reconstruct_auto
     from pde2cad.report import build_report
     from pde2cad.occ import write_step
@@ -121,11 +121,26 @@ def _box_cloud_report(tmp_path: Path, noise: float = 0.0) -> tuple[dict, list[st
     points = trimesh.sample.sample_surface(box, 30_000, seed=1)[0]
     points = points + np.random.default_rng(3).normal(0.0, noise * np.sqrt(6.96), points.shape)
     path = tmp_path / "box.xyz"
-    np.savetxt(path, points)
+    np.savetxt(path, np.repeat(points, repeat, axis=0))
     said: list[str] = []
     rec, layout = reconstruct_auto(read_surface(path), continuity="c1", message=said.append)
     report = build_report(rec, write_step(rec.shape, tmp_path / "box.step"), orthogonal=False)
     return report, said, layout
+
+
+def test_a_cloud_with_every_point_repeated_is_laid_out_as_read_once(tmp_path: Path) -> None:
+    """Each sample written 3 times (scans and exports repeat points): the repeats are read
+    once, the box comes out as from the single cloud (6 faces, 12 creases, a solid), and
+    every input row gets a label (repeats the same). Before, the repeats left no
+    nearest-neighbour spacing and the crease regions fell into 4-point segments."""
+    report, said, layout = _box_cloud_report(tmp_path, repeat=3)
+    assert any("60000 repeated points read once" in line for line in said)
+    assert layout.summary["kind"] == "crease regions" and layout.summary["patches"] == 6
+    s = report["summary"]
+    assert s["valid"] and s["solid"] and s["n_faces"] == 6 and s["max_gap_rel"] <= 1e-7
+    assert s["crease_edges"] == 12 and s["mean_error_rel"] <= 1e-3
+    labels = layout.labels  # type: ignore[attr-defined]
+    assert len(labels) == 90_000 and (labels[0::3] == labels[1::3]).all()
 
 
 def test_a_clean_cloud_of_a_box_takes_its_crease_regions(tmp_path: Path) -> None:

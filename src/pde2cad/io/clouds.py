@@ -250,6 +250,17 @@ def _read_text(path: Path, columns: int) -> NDArray[np.float64]:
 
 
 # --------------------------------------------------------------------------- labels
+def first_of_repeats(points: NDArray[np.float64]) -> NDArray[np.int64] | None:
+    """Indices (ascending) of the first of each set of exactly repeated points, or None when
+    no point repeats. Scans and meshes read as points repeat samples; a cloud whose every
+    point is repeated has no nearest-neighbour spacing."""
+    order = np.lexsort(points.T[::-1])
+    same = np.all(points[order[1:]] == points[order[:-1]], axis=1)
+    if not same.any():
+        return None
+    return np.sort(order[np.r_[True, ~same]])
+
+
 def as_labels(values: ArrayLike, count: int, source: str) -> NDArray[np.int64]:
     """Validate per-point labels and cast them to int64.
 

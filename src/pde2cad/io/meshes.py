@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pde2cad.errors import InputError
+from pde2cad.io.clouds import first_of_repeats
 from pde2cad.layout.auto import (
     CREASE_ANGLE,
     CURVATURE_PERCENTILE,
@@ -592,6 +593,13 @@ def reconstruct_auto(surface: Surface, *, patches: int | None = None,
 
     say = message or (lambda text: None)
     full = surface
+    keep = first_of_repeats(surface.points)
+    if keep is not None:
+        # Repeats read once (their labels come back at the end, as a subsample's do).
+        surface = dataclasses.replace(
+            surface, points=surface.points[keep],
+            point_triangles=None if surface.point_triangles is None else surface.point_triangles[keep])
+        say(f"{len(full.points) - len(keep)} repeated points read once")
     if len(surface.points) > FIT_POINTS:
         pick = np.sort(np.random.default_rng(0).choice(len(surface.points), FIT_POINTS,
                                                        replace=False))
